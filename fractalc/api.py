@@ -1,0 +1,190 @@
+"""The Python API (LANGUAGE.md, "Python API"): the pipeline as one object.
+
+    parse -> check -> lower -> emit -> build -> run -> write
+
+`load`/`loads` run the first three stages at once (so scene errors surface
+immediately); the kernel is emitted and built on first use, per render
+settings, and reused while only params, size, samples or seed change.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+
+from . import __version__, run
+from .build import build, open_device
+from .check import RENDER_KEYS, check, check_value
+from .emit import Target, emit
+from .errors import RenderError, SceneError, diagnostic
+from .lower import lower
+from .parse import parse
+from .program import CheckedScene, RenderSettings
+from .write import write
+
+PRECISIONS = ("float", "double")
+_RUNTIME_KEYS = {"width", "height", "samples"}   # change without rebuilding
+
+
+@dataclass(frozen=True)
+class Image:
+    """A rendered image: linear colour and the AOVs of the pixel-centre rays."""
+    rgba: np.ndarray        # (H, W, 4) float32, linear
+    depth: np.ndarray       # (H, W) ray distance, +inf where the ray missed
+    normal: np.ndarray      # (H, W, 3) world-space normal (0 on misses)
+    steps: np.ndarray       # (H, W) march steps
+    metadata: dict = field(default_factory=dict)
+
+    def planes(self) -> dict[str, np.ndarray]:
+        planes = {c: self.rgba[..., i] for i, c in enumerate("RGBA")}
+        planes["Z"] = self.depth
+        planes.update({f"N.{c}": self.normal[..., i] for i, c in enumerate("xyz")})
+        planes["steps"] = self.steps
+        return planes
+
+    def save(self, path: str) -> None:
+        """Write EXR (linear, all channels, metadata) or PNG (sRGB 8-bit)."""
+        write(path, self.planes(), self.metadata)
+
+
+class Scene:
+    """A checked scene, ready to compile and render."""
+
+    def __init__(self, checked: CheckedScene, params: dict | None = None,
+                 precision: str | None = None, device: str | None = None):
+        self.checked = checked
+        self.precision = precision or checked.render.precision
+        if self.precision not in PRECISIONS:
+            raise ValueError(f"precision must be 'float' or 'double', not {self.precision!r}")
+        self.device_spec = device
+        self.params = {p.name: p.default for p in checked.params}
+        self.set_params(params or {})
+
+    # ---- params ------------------------------------------------------------
+
+    def set_params(self, values: dict) -> None:
+        """Change param values (no rebuild); each must lie in its range."""
+        declared = {p.name: p for p in self.checked.params}
+        for name, value in values.items():
+            info = declared.get(name)
+            if info is None:
+                known = ", ".join(declared) or "none"
+                raise SceneError([diagnostic(self.checked.file, self.checked.source, _file_start(),
+                                             f"the scene has no param '{name}' (its params: {known})")])
+            value = float(value)
+            if (info.low is not None and value < info.low) or (info.high is not None and value > info.high):
+                raise SceneError([diagnostic(self.checked.file, self.checked.source, info.span,
+                                             f"'{name}' = {value:g} is outside its range "
+                                             f"[{info.low:g}, {info.high:g}]")])
+            self.params[name] = value
+
+    def _param_values(self) -> list[float]:
+        return [self.params[p.name] for p in self.checked.params]
+
+    # ---- compiling ---------------------------------------------------------
+
+    @property
+    def device(self):
+        return open_device(self.device_spec)
+
+    def _target(self, lanes: int | None = None) -> Target:
+        double = self.precision == "double"
+        if lanes is None:
+            device = self.device
+            if double and not device.info.double:
+                raise RenderError(f"the OpenCL device '{device.info.name}' does not support double precision")
+            lanes = device.lanes
+        return Target(lanes=lanes, double=double)
+
+    def kernel_source(self, lanes: int | None = None, **render_keys) -> str:
+        """The standalone OpenCL C source (no includes) for this scene."""
+        settings = self._settings(render_keys)
+        scene = replace(self.checked, render=settings)
+        return emit(lower(scene), self._target(lanes))
+
+    def _program(self, settings: RenderSettings):
+        # Size and samples are kernel arguments: keep them out of the source.
+        compiled = replace(settings, **{k: getattr(RenderSettings(), k) for k in _RUNTIME_KEYS})
+        target = self._target()
+        source = emit(lower(replace(self.checked, render=compiled)), target)
+        return build(source, self.device), target
+
+    def _settings(self, overrides: dict) -> RenderSettings:
+        settings = self.checked.render
+        names = {f.name for f in fields(RenderSettings)}
+        for key, value in overrides.items():
+            if key not in names:
+                raise ValueError(f"unknown render setting '{key}' (known: {', '.join(sorted(names))})")
+            if value is None:
+                continue
+            settings = replace(settings, **{key: check_value(RENDER_KEYS[key], key, value)})
+        return settings
+
+    # ---- running -----------------------------------------------------------
+
+    def distance(self, points) -> np.ndarray:
+        """Distance estimates at (N, 3) points, computed by the compiled kernel."""
+        program, target = self._program(self.checked.render)
+        return run.distances(program, self.device, points, self._param_values(),
+                             target.lanes, target.double)
+
+    def render(self, seed: int = 0, progress: bool = False, **render_keys) -> Image:
+        """Render with the file's settings, overridden by keyword (any render
+        key: width=, height=, samples=, ao=, max_steps=, ...)."""
+        settings = self._settings(render_keys)
+        program, target = self._program(settings)
+        frame = run.Frame(settings.width, settings.height, settings.samples, seed,
+                          run.camera_block(self.checked.camera))
+        bar = run.terminal_progress(settings.width * settings.height) if progress else None
+        try:
+            planes = run.render(program, self.device, frame, self._param_values(), target.lanes,
+                                target.double, bar.update if bar else None)
+        finally:
+            if bar:
+                bar.close()
+        rgba = np.stack([planes[c] for c in "RGBA"], axis=-1)
+        normal = np.stack([planes[f"N.{c}"] for c in "xyz"], axis=-1)
+        return Image(rgba, planes["Z"], normal, planes["steps"], self._metadata(settings))
+
+    def _metadata(self, settings: RenderSettings) -> dict[str, str]:
+        camera = self.checked.camera
+        vector = lambda v: " ".join(f"{x:g}" for x in v)  # noqa: E731
+        metadata = {
+            "version": __version__,
+            "scene_file": self.checked.file,
+            "scene_sha256": hashlib.sha256(self.checked.source.encode()).hexdigest(),
+            "camera.position": vector(camera.position), "camera.target": vector(camera.target),
+            "camera.up": vector(camera.up), "camera.fov": f"{camera.fov:g}",
+            "params": " ".join(f"{k}={v:g}" for k, v in self.params.items()),
+            "precision": self.precision,
+            "device": self.device.info.name,
+        }
+        for f in fields(RenderSettings):
+            value = getattr(settings, f.name)
+            metadata[f"render.{f.name}"] = vector(value) if isinstance(value, tuple) else str(value)
+        return metadata
+
+
+def _file_start():
+    from .errors import Span
+    return Span(1, 1, 1, 2)
+
+
+def loads(text: str, params: dict | None = None, precision: str | None = None,
+          device: str | None = None, path: str = "<string>") -> Scene:
+    """Parse and check scene text; raise SceneError on any mistake in it."""
+    return Scene(check(parse(text, path)), params, precision, device)
+
+
+def load(path: str | os.PathLike, params: dict | None = None, precision: str | None = None,
+         device: str | None = None) -> Scene:
+    """Read, parse and check a .frac file."""
+    path = os.fspath(path)
+    try:
+        with open(path, "rb") as f:
+            data = f.read(8 * 1024 * 1024 + 1)
+    except OSError as error:
+        raise RenderError(f"cannot read {path}: {error.strerror}") from None
+    return loads(data.decode("utf-8", errors="replace"), params, precision, device, path)

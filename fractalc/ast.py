@@ -1,0 +1,153 @@
+"""Immutable AST nodes produced by `parse`, each carrying its source span.
+
+Nodes compare by identity (`eq=False`): two `sphere(1)` calls at different
+places are different nodes, and hashing never walks a subtree.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Union
+
+from .errors import Span
+
+node = dataclass(frozen=True, eq=False)
+
+
+# ---- expressions -----------------------------------------------------------
+
+@node
+class Number:
+    value: float
+    span: Span
+
+
+@node
+class Name:
+    name: str
+    span: Span
+
+
+@node
+class Vector:
+    items: tuple["Expr", ...]
+    span: Span
+
+
+@node
+class Unary:
+    op: str            # "-"
+    operand: "Expr"
+    span: Span
+
+
+@node
+class Binary:
+    op: str            # + - * / | &
+    left: "Expr"
+    right: "Expr"
+    span: Span
+
+
+@node
+class Arg:
+    name: str | None   # None for a positional argument
+    value: "Expr"
+    span: Span
+
+
+@node
+class Call:
+    name: str
+    name_span: Span
+    args: tuple[Arg, ...]
+    span: Span
+
+
+@node
+class Method:
+    """`receiver.name(args)`: a transform of a shape."""
+    receiver: "Expr"
+    name: str
+    name_span: Span
+    args: tuple[Arg, ...]
+    span: Span
+
+
+Expr = Union[Number, Name, Vector, Unary, Binary, Call, Method]
+
+
+# ---- blocks and declarations -----------------------------------------------
+
+@node
+class Entry:
+    key: str
+    key_span: Span
+    value: Union[Expr, "Block"]
+    span: Span
+
+
+@node
+class Block:
+    entries: tuple[Entry, ...]
+    span: Span
+
+
+@node
+class ParamDecl:
+    name: str
+    name_span: Span
+    default: Expr
+    bounds: tuple[Expr, Expr] | None
+    span: Span
+
+
+@node
+class LetDecl:
+    name: str
+    name_span: Span
+    value: Expr
+    span: Span
+
+
+@node
+class MaterialDecl:
+    name: str
+    name_span: Span
+    block: Block
+    span: Span
+
+
+@node
+class SceneDecl:
+    shape: Expr
+    span: Span
+
+
+@node
+class CameraDecl:
+    block: Block
+    span: Span
+
+
+@node
+class LightDecl:
+    kind: str
+    kind_span: Span
+    block: Block
+    span: Span
+
+
+@node
+class RenderDecl:
+    block: Block
+    span: Span
+
+
+Decl = Union[ParamDecl, LetDecl, MaterialDecl, SceneDecl, CameraDecl, LightDecl, RenderDecl]
+
+
+@node
+class Program:
+    decls: tuple[Decl, ...]
+    file: str
+    source: str

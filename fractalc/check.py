@@ -1,0 +1,631 @@
+"""Stage 2: AST -> checked scene (`check`).
+
+Resolves names, types and arguments, folds constants (through `ir`), checks
+ranges, and collects every error with its span before raising one
+`SceneError`. An expression that failed evaluates to `_ERROR`, which later
+checks accept silently, so one mistake gives one message.
+"""
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass, replace
+
+from . import ast, ir
+from .errors import Diagnostic, SceneError, Span, diagnostic
+from .program import (DEFAULT_MATERIAL, Camera, CheckedScene, Combination, Light, Material,
+                      ParamInfo, Primitive, RenderSettings, Transformed, WithMaterial)
+from .stdlib import COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
+
+# The language's value types.
+NUM, SHAPE, MATERIAL, WORD = "number", "shape", "material", "word"
+NOT_YET = {
+    "fractal": {"mandelbulb", "julia", "mandelbox", "menger", "sierpinski"},
+    "render": {"glow", "fog"},
+    "camera": {"aperture", "focus"},
+}
+
+
+def vec_type(n: int) -> str:
+    return f"vec{n}"
+
+
+@dataclass(frozen=True)
+class Value:
+    type: str          # number | vec2..vec4 | shape | material | word | error
+    data: object       # ir.Expr | ir.Vec | Shape | material name | word
+
+
+_ERROR = Value("error", None)
+
+_TYPE_WORDS = {NUM: "a number", SHAPE: "a shape", MATERIAL: "a material", WORD: "a name",
+               "vec2": "a 2-vector", "vec3": "a 3-vector", "vec4": "a 4-vector",
+               "size": "a number or a 3-vector", "int": "a whole number", "rgb": "a colour (r, g, b)"}
+
+
+class _Failed(Exception):
+    """Raised to abandon the current expression after recording an error."""
+
+
+class _Checker:
+    def __init__(self, program: ast.Program):
+        self.program = program
+        self.errors: list[Diagnostic] = []
+        self.library = library()
+        self.params: dict[str, ParamInfo] = {}
+        self.lets: dict[str, ast.LetDecl] = {}
+        self.let_values: dict[str, Value] = {}
+        self.evaluating: list[str] = []
+        self.material_decls: dict[str, ast.MaterialDecl] = {}
+        self.materials: dict[str, Material] = {}
+        self.colors: dict[tuple, str] = {}
+
+    # ---- diagnostics -------------------------------------------------------
+
+    def error(self, span: Span, message: str) -> None:
+        self.errors.append(diagnostic(self.program.file, self.program.source, span, message))
+
+    def fail(self, span: Span, message: str):
+        self.error(span, message)
+        raise _Failed
+
+    # ---- declarations ------------------------------------------------------
+
+    def run(self) -> CheckedScene:
+        decls = self.program.decls
+        names: dict[str, Span] = {}
+        singles: dict[type, ast.Decl] = {}
+        for decl in decls:
+            if isinstance(decl, (ast.ParamDecl, ast.LetDecl, ast.MaterialDecl)):
+                if decl.name in names:
+                    first = names[decl.name]
+                    self.error(decl.name_span, f"'{decl.name}' is already declared (line {first.line})")
+                    continue
+                names[decl.name] = decl.name_span
+            if isinstance(decl, (ast.SceneDecl, ast.CameraDecl, ast.RenderDecl)):
+                kind = type(decl).__name__.removesuffix("Decl").lower()
+                if type(decl) in singles:
+                    first = singles[type(decl)].span
+                    self.error(decl.span, f"a second '{kind}' declaration (the first is at line {first.line})")
+                    continue
+                singles[type(decl)] = decl
+            if isinstance(decl, ast.LetDecl):
+                self.lets[decl.name] = decl
+            elif isinstance(decl, ast.MaterialDecl):
+                self.material_decls[decl.name] = decl
+
+        for decl in decls:
+            if isinstance(decl, ast.ParamDecl) and decl.name not in self.params:
+                self.declare_param(decl)
+        self.materials[DEFAULT_MATERIAL] = Material(
+            DEFAULT_MATERIAL, ir.vec(*(ir.const(0.8) for _ in range(3))),
+            ir.const(0.3), ir.const(32.0), ir.const(0.0))
+        for name, decl in self.material_decls.items():
+            self.materials[name] = self.material(decl)
+        for name in self.lets:
+            self.let_value(name)
+
+        shape = None
+        scene = singles.get(ast.SceneDecl)
+        if scene is None:
+            end = len(self.program.source.splitlines()) or 1
+            self.error(Span(end, 1, end, 2), "the file has no 'scene' declaration (add e.g. 'scene sphere(1)')")
+        else:
+            value = self.evaluate(scene.shape)
+            if value.type not in (SHAPE, "error"):
+                self.error(scene.shape.span, f"'scene' needs a shape, this is {_TYPE_WORDS[value.type]}")
+            shape = value.data
+        camera = self.camera(singles.get(ast.CameraDecl))
+        lights = tuple(self.light(d) for d in decls if isinstance(d, ast.LightDecl))
+        render = self.render(singles.get(ast.RenderDecl))
+        if self.errors:
+            raise SceneError(self.errors)
+        return CheckedScene(self.program.file, self.program.source, tuple(self.params.values()),
+                            self.materials, shape, camera, tuple(l for l in lights if l), render)
+
+    def declare_param(self, decl: ast.ParamDecl) -> None:
+        default = self.constant_number(decl.default, "a param's value")
+        low = high = None
+        if decl.bounds:
+            low = self.constant_number(decl.bounds[0], "a param's bound")
+            high = self.constant_number(decl.bounds[1], "a param's bound")
+            if None not in (low, high, default):
+                if low > high:
+                    self.error(decl.bounds[0].span, f"the range [{low:g}, {high:g}] is empty")
+                elif not low <= default <= high:
+                    self.error(decl.default.span,
+                               f"'{decl.name}' = {default:g} is outside its range [{low:g}, {high:g}]")
+        self.params[decl.name] = ParamInfo(decl.name, len(self.params), default or 0.0, low, high, decl.span)
+
+    def constant_number(self, expr: ast.Expr, what: str) -> float | None:
+        value = self.evaluate(expr)
+        if value.type == "error":
+            return None
+        if value.type != NUM or not ir.is_const(value.data):
+            self.error(expr.span, f"{what} must be a constant number")
+            return None
+        return value.data.value
+
+    def let_value(self, name: str) -> Value:
+        if name in self.let_values:
+            return self.let_values[name]
+        decl = self.lets[name]
+        if name in self.evaluating:
+            cycle = " -> ".join(self.evaluating[self.evaluating.index(name):] + [name])
+            self.error(decl.name_span, f"'{name}' is defined in terms of itself ({cycle})")
+            self.let_values[name] = _ERROR
+            return _ERROR
+        self.evaluating.append(name)
+        value = self.evaluate(decl.value)
+        self.evaluating.pop()
+        self.let_values.setdefault(name, value)
+        return self.let_values[name]
+
+    # ---- expressions -------------------------------------------------------
+
+    def evaluate(self, expr: ast.Expr) -> Value:
+        try:
+            return self._evaluate(expr)
+        except _Failed:
+            return _ERROR
+
+    def _evaluate(self, e: ast.Expr) -> Value:
+        if isinstance(e, ast.Number):
+            return Value(NUM, ir.const(e.value))
+        if isinstance(e, ast.Name):
+            return self.name(e)
+        if isinstance(e, ast.Vector):
+            items = [self._evaluate(x) for x in e.items]
+            if any(v.type == "error" for v in items):
+                return _ERROR
+            for item, v in zip(e.items, items):
+                if v.type != NUM:
+                    self.fail(item.span, f"a vector's components must be numbers, this is {_TYPE_WORDS[v.type]}")
+            if len(items) > 4:
+                self.fail(e.span, f"vectors have 2 to 4 components, this one has {len(items)}")
+            return Value(vec_type(len(items)), ir.Vec(tuple(v.data for v in items)))
+        if isinstance(e, ast.Unary):
+            operand = self._evaluate(e.operand)
+            if operand.type == "error":
+                return _ERROR
+            if operand.type == SHAPE:
+                self.fail(e.span, "a shape cannot be negated (to cut one shape from another use 'a - b')")
+            return self.arithmetic(e, "neg", [operand])
+        if isinstance(e, ast.Binary):
+            return self.binary(e)
+        if isinstance(e, ast.Call):
+            return self.call(e)
+        if isinstance(e, ast.Method):
+            return self.method(e)
+        raise TypeError(f"unexpected AST node {e!r}")
+
+    def name(self, e: ast.Name) -> Value:
+        if e.name in self.params:
+            info = self.params[e.name]
+            return Value(NUM, ir.Param(info.index, info.name))
+        if e.name in self.lets:
+            return self.let_value(e.name)
+        if e.name in self.material_decls:
+            return Value(MATERIAL, e.name)
+        if e.name in self.library.signatures or e.name in COMBINATORS or e.name in MATH:
+            self.fail(e.span, f"'{e.name}' is a function: call it, e.g. '{e.name}()'")
+        return Value(WORD, e.name)
+
+    def unknown_name(self, span: Span, name: str) -> None:
+        known = list(self.params) + list(self.lets) + list(self.material_decls)
+        close = difflib.get_close_matches(name, known, n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        self.fail(span, f"unknown name '{name}'{hint}")
+
+    def value_of(self, e: ast.Expr) -> Value:
+        """Evaluate an expression that must be a value (not a bare word)."""
+        value = self._evaluate(e)
+        if value.type == WORD:
+            self.unknown_name(e.span, value.data)
+        return value
+
+    def binary(self, e: ast.Binary) -> Value:
+        left, right = self.value_of(e.left), self.value_of(e.right)
+        if "error" in (left.type, right.type):
+            return _ERROR
+        if left.type == SHAPE and right.type == SHAPE:
+            if e.op == "*" or e.op == "/" or e.op == "+":
+                self.fail(e.span, f"'{e.op}' does not combine shapes: use '|' (union), '&' (intersect) or '-' (subtract)")
+            kind = {"|": "union", "&": "intersect", "-": "subtract"}[e.op]
+            return Value(SHAPE, Combination(kind, (left.data, right.data), ir.const(0.0), e.span))
+        if SHAPE in (left.type, right.type):
+            other = right if left.type == SHAPE else left
+            self.fail(e.span, f"'{e.op}' needs two shapes or two numbers/vectors, not a shape and {_TYPE_WORDS[other.type]}")
+        if e.op in "|&":
+            self.fail(e.span, f"'{e.op}' combines shapes; these are {_TYPE_WORDS[left.type]} and {_TYPE_WORDS[right.type]}")
+        return self.arithmetic(e, {"+": "+", "-": "-", "*": "*", "/": "/"}[e.op], [left, right])
+
+    def arithmetic(self, e, op: str, operands: list[Value], mode: str = "map") -> Value:
+        """Component-wise arithmetic on numbers and vectors; numbers broadcast."""
+        for operand in operands:
+            if operand.type not in (NUM, "vec2", "vec3", "vec4"):
+                self.fail(e.span, f"'{op}' needs numbers or vectors, not {_TYPE_WORDS[operand.type]}")
+        sizes = {len(o.data) for o in operands if o.type != NUM}
+        if len(sizes) > 1:
+            self.fail(e.span, f"'{op}' on vectors of different sizes ({', '.join(map(str, sorted(sizes)))})")
+        size = sizes.pop() if sizes else 0
+        lanes = [o.data.items if o.type != NUM else (o.data,) * max(size, 1) for o in operands]
+        try:
+            items = tuple(ir.op(op, *args) for args in zip(*lanes))
+        except (ValueError, ZeroDivisionError, OverflowError):
+            self.fail(e.span, f"'{op}' is undefined for these values")
+        if size == 0:
+            return Value(NUM, items[0])
+        return Value(vec_type(size), ir.Vec(items))
+
+    # ---- calls -------------------------------------------------------------
+
+    def bind(self, e, signature: Signature, args: tuple[ast.Arg, ...]) -> dict[str, tuple[ast.Arg, Value]]:
+        """Match arguments to parameters; report unknown, duplicate, extra
+        and missing arguments."""
+        params = signature.parameters
+        bound: dict[str, tuple[ast.Arg, Value]] = {}
+        positional = 0
+        for arg in args:
+            if arg.name is None:
+                if positional >= len(params):
+                    self.fail(arg.span, f"'{signature.name}' takes at most {len(params)} "
+                                        f"argument{'s' if len(params) != 1 else ''}, this is one more")
+                name = params[positional].name
+                positional += 1
+            else:
+                name = arg.name
+                if name not in {p.name for p in params}:
+                    names = ", ".join(p.name for p in params) or "none"
+                    self.fail(arg.span, f"'{signature.name}' has no argument '{name}' (its arguments: {names})")
+            if name in bound:
+                self.fail(arg.span, f"argument '{name}' is given twice")
+            bound[name] = (arg, self.value_of(arg.value))
+        for p in params:
+            if p.name not in bound and p.default is None:
+                self.fail(e.span, f"'{signature.name}' needs the argument '{p.name}'")
+        return bound
+
+    def convert(self, span: Span, value: Value, param: Parameter, owner: str):
+        """An argument value as the parameter's type (ir.Expr or ir.Vec)."""
+        if value.type == "error":
+            raise _Failed
+        want = param.type
+        ok = {"num": (NUM,), "int": (NUM,), "vec3": ("vec3",), "vec4": ("vec4",),
+              "size": (NUM, "vec3"), "material": (MATERIAL,), "shape": (SHAPE,)}[want]
+        if value.type not in ok:
+            word = _TYPE_WORDS.get(want if want != "num" else NUM)
+            if value.type == WORD and want != "material":
+                self.unknown_name(span, value.data)
+            if value.type == WORD:
+                self.fail(span, f"unknown material '{value.data}'")
+            self.fail(span, f"'{param.name}' of '{owner}' needs {word}, this is {_TYPE_WORDS[value.type]}")
+        data = value.data
+        if want == "size" and value.type == NUM:
+            data = ir.vec(data, data, data)
+        self.check_constraints(span, data, param, owner)
+        return data
+
+    def check_constraints(self, span: Span, data, param: Parameter, owner: str,
+                          others: dict | None = None) -> None:
+        items = data.items if isinstance(data, ir.Vec) else (data,)
+        if not all(isinstance(x, ir.Const) for x in items):
+            return   # depends on a param: the param's own range guards it
+        values = [x.value for x in items]
+        shown = f"{values[0]:g}" if len(values) == 1 else "(" + ", ".join(f"{v:g}" for v in values) + ")"
+        if param.type == "int" and any(v != math.floor(v) for v in values):
+            self.fail(span, f"'{param.name}' of '{owner}' must be a whole number, not {shown}")
+        for c in param.constraints:
+            if c == "nonzero":
+                ok, says = any(v != 0 for v in values), "must not be zero"
+            elif ".." in c:
+                lo, hi = (float(x) for x in c.split(".."))
+                ok, says = all(lo <= v <= hi for v in values), f"must be between {lo:g} and {hi:g}"
+            else:
+                opname, bound = c[:2] if c[1] == "=" else c[0], c[2:] if c[1] == "=" else c[1:]
+                if bound[0].isalpha():
+                    if not others or bound not in others:
+                        continue
+                    limit, bound_text = others[bound], f"'{bound}' ({others[bound]:g})"
+                else:
+                    limit, bound_text = float(bound), bound
+                test = {">": float.__gt__, ">=": float.__ge__, "<": float.__lt__, "<=": float.__le__}[opname]
+                ok = all(test(v, limit) for v in values)
+                says = f"must be {'greater than' if opname == '>' else 'at least' if opname == '>=' else 'less than' if opname == '<' else 'at most'} {bound_text}"
+            if not ok:
+                self.fail(span, f"'{param.name}' of '{owner}' {says}, not {shown}")
+
+    def bound_args(self, e, signature: Signature, args) -> tuple:
+        bound = self.bind(e, signature, args)
+        converted: dict[str, object] = {}
+        failed = False
+        for p in signature.parameters:
+            try:
+                if p.name in bound:
+                    arg, value = bound[p.name]
+                    converted[p.name] = self.convert(arg.span, value, p, signature.name)
+                else:
+                    converted[p.name] = _default(p)
+            except _Failed:
+                failed = True
+        if failed:
+            raise _Failed
+        constants = {k: v.value for k, v in converted.items() if isinstance(v, ir.Const)}
+        for p in signature.parameters:
+            if p.name in bound and any(c.startswith(("<=", ">=")) and c[2:3].isalpha() for c in p.constraints):
+                self.check_constraints(bound[p.name][0].span, converted[p.name], p, signature.name, constants)
+        return tuple(converted[p.name] for p in signature.parameters)
+
+    def call(self, e: ast.Call) -> Value:
+        name = e.name
+        if name in MATH:
+            return self.math(e)
+        if name in COMBINATORS:
+            return self.combinator(e)
+        signature = self.library.signatures.get(name)
+        if signature is None:
+            if name in NOT_YET["fractal"]:
+                self.fail(e.name_span, f"'{name}' is not supported yet")
+            known = list(self.library.signatures) + list(COMBINATORS) + list(MATH)
+            close = difflib.get_close_matches(name, known, n=1)
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            self.fail(e.name_span, f"unknown function '{name}'{hint}")
+        return Value(SHAPE, Primitive(signature, self.bound_args(e, signature, e.args), e.span))
+
+    def combinator(self, e: ast.Call) -> Value:
+        signature = COMBINATORS[e.name]
+        shapes = [a for a in e.args if a.name is None]
+        options = tuple(a for a in e.args if a.name is not None)
+        values = [self.value_of(a.value) for a in shapes]
+        for arg, value in zip(shapes, values):
+            if value.type not in (SHAPE, "error"):
+                self.fail(arg.span, f"'{e.name}' combines shapes, this is {_TYPE_WORDS[value.type]}")
+        if any(v.type == "error" for v in values):
+            raise _Failed
+        need = 2
+        if len(values) < need:
+            self.fail(e.span, f"'{e.name}' needs at least {need} shapes")
+        if e.name == "subtract" and len(values) != 2:
+            self.fail(e.span, f"'subtract' takes exactly 2 shapes (a with b cut away), not {len(values)}")
+        (smooth,) = self.bound_args(e, signature, options)
+        return Value(SHAPE, Combination(e.name, tuple(v.data for v in values), smooth, e.span))
+
+    def math(self, e: ast.Call) -> Value:
+        arity, mode = MATH[e.name]
+        if any(a.name is not None for a in e.args):
+            named = next(a for a in e.args if a.name is not None)
+            self.fail(named.span, f"'{e.name}' takes positional arguments only")
+        if len(e.args) != arity:
+            self.fail(e.span, f"'{e.name}' takes {arity} argument{'s' if arity > 1 else ''}, not {len(e.args)}")
+        values = [self.value_of(a.value) for a in e.args]
+        if any(v.type == "error" for v in values):
+            raise _Failed
+        if mode == "map":
+            return self.arithmetic(e, e.name, values)
+        for arg, v in zip(e.args, values):
+            if v.type not in ("vec2", "vec3", "vec4") or (mode.startswith("vec3") and v.type != "vec3"):
+                want = "a 3-vector" if mode.startswith("vec3") else "a vector"
+                self.fail(arg.span, f"'{e.name}' needs {want}, this is {_TYPE_WORDS[v.type]}")
+        if len(values) == 2 and len(values[0].data) != len(values[1].data):
+            self.fail(e.span, f"'{e.name}' on vectors of different sizes")
+        try:
+            return _vector_math(e.name, [v.data for v in values])
+        except (ValueError, ZeroDivisionError):
+            self.fail(e.span, f"'{e.name}' is undefined here (a zero vector?)")
+
+    def method(self, e: ast.Method) -> Value:
+        receiver = self.value_of(e.receiver)
+        if receiver.type == "error":
+            raise _Failed
+        signature = TRANSFORMS.get(e.name)
+        if signature is None:
+            close = difflib.get_close_matches(e.name, list(TRANSFORMS), n=1)
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            self.fail(e.name_span, f"unknown transform '.{e.name}'{hint}")
+        if receiver.type != SHAPE:
+            self.fail(e.name_span, f"'.{e.name}' transforms a shape, this is {_TYPE_WORDS[receiver.type]}")
+        args = self.bound_args(e, signature, e.args)
+        if e.name == "material":
+            return Value(SHAPE, WithMaterial(receiver.data, args[0], e.span))
+        if e.name == "color":
+            return Value(SHAPE, WithMaterial(receiver.data, self.color_material(args[0]), e.span))
+        return Value(SHAPE, Transformed(e.name, receiver.data, args, e.span))
+
+    def color_material(self, rgb: ir.Vec) -> str:
+        """`.color(rgb)`: a material with the default's finish in that colour."""
+        key = rgb.items
+        if key not in self.colors:
+            name = f"color{len(self.colors)}"
+            self.colors[key] = name
+            self.materials[name] = replace(self.materials[DEFAULT_MATERIAL], name=name, color=rgb)
+        return self.colors[key]
+
+    # ---- blocks ------------------------------------------------------------
+
+    def entries(self, block: ast.Block | None, keys: dict[str, Parameter], owner: str) -> dict:
+        """Check a block's entries against `keys` (with types, defaults and
+        constraints); unknown and duplicate keys are errors."""
+        found: dict[str, object] = {}
+        spans: dict[str, Span] = {}
+        for entry in block.entries if block else ():
+            if entry.key in spans:
+                self.error(entry.key_span, f"'{entry.key}' is given twice in '{owner}'")
+                continue
+            spans[entry.key] = entry.key_span
+            if entry.key in NOT_YET.get(owner, ()):
+                self.error(entry.key_span, f"'{entry.key}' is not supported yet")
+                continue
+            param = keys.get(entry.key)
+            if param is None:
+                close = difflib.get_close_matches(entry.key, list(keys), n=1)
+                hint = f" (did you mean '{close[0]}'?)" if close else f" (known: {', '.join(keys)})"
+                self.error(entry.key_span, f"'{owner}' has no key '{entry.key}'{hint}")
+                continue
+            if isinstance(entry.value, ast.Block):
+                self.error(entry.value.span, f"'{entry.key}' takes a value, not a block")
+                continue
+            try:
+                found[entry.key] = self.entry_value(entry, param, owner)
+            except _Failed:
+                pass
+        return found
+
+    def entry_value(self, entry: ast.Entry, param: Parameter, owner: str):
+        value = self._evaluate(entry.value)
+        if param.type.startswith("word:"):
+            choices = param.type[5:].split("|")
+            numeric = "num" in choices
+            if value.type == WORD and value.data in choices:
+                return value.data
+            if not (numeric and value.type == NUM):
+                listed = " or ".join(f"'{c}'" if c != "num" else "a number" for c in choices)
+                self.fail(entry.value.span, f"'{entry.key}' must be {listed}")
+            param = _P(param.name, "num", None, *param.constraints)
+        data = self.convert(entry.value.span, value, param, owner)
+        if owner == "material":
+            return data
+        items = data.items if isinstance(data, ir.Vec) else (data,)
+        if not all(isinstance(x, ir.Const) for x in items):
+            self.fail(entry.value.span, f"'{entry.key}' must be a constant (it depends on a param)")
+        values = tuple(x.value for x in items)
+        return values if isinstance(data, ir.Vec) else (int(values[0]) if param.type == "int" else values[0])
+
+    def material(self, decl: ast.MaterialDecl) -> Material:
+        found = self.entries(decl.block, MATERIAL_KEYS, "material")
+        default = self.materials[DEFAULT_MATERIAL]
+        return Material(decl.name, found.get("color", default.color),
+                        found.get("specular", default.specular),
+                        found.get("shininess", default.shininess),
+                        found.get("reflectivity", default.reflectivity))
+
+    def camera(self, decl: ast.CameraDecl | None) -> Camera:
+        found = self.entries(decl.block if decl else None, CAMERA_KEYS, "camera")
+        camera = Camera(**found)
+        forward = [t - p for t, p in zip(camera.target, camera.position)]
+        cross = _cross(forward, camera.up)
+        if decl and math.sqrt(sum(c * c for c in cross)) <= 1e-9 * max(1.0, _norm(forward) * _norm(camera.up)):
+            entry = next((x for x in decl.block.entries if x.key == "up"), None)
+            if _norm(forward) == 0:
+                where = next((x.value.span for x in decl.block.entries if x.key == "target"), decl.span)
+                self.error(where, "the camera's target is its position: it looks nowhere")
+            else:
+                self.error(entry.value.span if entry else decl.span,
+                           "the camera's 'up' is parallel to its view direction (target - position)")
+        return camera
+
+    def light(self, decl: ast.LightDecl) -> Light | None:
+        keys = LIGHT_KEYS.get(decl.kind)
+        if keys is None:
+            self.error(decl.kind_span, f"unknown light kind '{decl.kind}' (known: directional, point)")
+            return None
+        found = self.entries(decl.block, keys, "light")
+        vector_key = "direction" if decl.kind == "directional" else "position"
+        if vector_key not in found:
+            if not any(e.key == vector_key for e in decl.block.entries):
+                self.error(decl.span, f"a {decl.kind} light needs '{vector_key}'")
+            return None
+        vector = found.pop(vector_key)
+        return Light(decl.kind, vector, **found)
+
+    def render(self, decl: ast.RenderDecl | None) -> RenderSettings:
+        found = self.entries(decl.block if decl else None, RENDER_KEYS, "render")
+        if found.get("reflections", 0) > 0:
+            entry = next(x for x in decl.block.entries if x.key == "reflections")
+            self.error(entry.value.span, "'reflections' above 0 is not supported yet")
+            found.pop("reflections")
+        return RenderSettings(**found)
+
+
+def _default(p: Parameter):
+    if isinstance(p.default, tuple):
+        return ir.Vec(tuple(ir.const(x) for x in p.default))
+    if p.type == "size":
+        return ir.vec(*(ir.const(p.default),) * 3)
+    return ir.const(p.default)
+
+
+def _norm(v) -> float:
+    return math.sqrt(sum(x * x for x in v))
+
+
+def _cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _vector_math(name: str, vectors: list[ir.Vec]) -> Value:
+    a = vectors[0].items
+
+    def dot(u, v):
+        total = ir.mul(u[0], v[0])
+        for x, y in zip(u[1:], v[1:]):
+            total = ir.add(total, ir.mul(x, y))
+        return total
+
+    if name == "length":
+        return Value(NUM, ir.op("sqrt", dot(a, a)))
+    if name == "dot":
+        return Value(NUM, dot(a, vectors[1].items))
+    if name == "normalize":
+        length = ir.op("sqrt", dot(a, a))
+        return Value(vec_type(len(a)), ir.Vec(tuple(ir.div(x, length) for x in a)))
+    b = vectors[1].items
+    return Value("vec3", ir.vec(ir.sub(ir.mul(a[1], b[2]), ir.mul(a[2], b[1])),
+                                ir.sub(ir.mul(a[2], b[0]), ir.mul(a[0], b[2])),
+                                ir.sub(ir.mul(a[0], b[1]), ir.mul(a[1], b[0]))))
+
+
+def _keys(*params: Parameter) -> dict[str, Parameter]:
+    return {p.name: p for p in params}
+
+
+def _P(name: str, type_: str, default=None, *constraints: str) -> Parameter:
+    return Parameter(name, type_, default, constraints)
+
+
+MATERIAL_KEYS = _keys(_P("color", "vec3", None, "0..1000"), _P("specular", "num", None, "0..1"),
+                      _P("shininess", "num", None, ">0"), _P("reflectivity", "num", None, "0..1"))
+CAMERA_KEYS = _keys(_P("position", "vec3"), _P("target", "vec3"), _P("up", "vec3", None, "nonzero"),
+                    _P("fov", "num", None, ">0", "<180"))
+_LIGHT_COMMON = (_P("color", "vec3", None, ">=0"), _P("intensity", "num", None, ">=0"),
+                 _P("shadows", "word:none|hard|soft"), _P("softness", "num", None, ">0"))
+LIGHT_KEYS = {"directional": _keys(_P("direction", "vec3", None, "nonzero"), *_LIGHT_COMMON),
+              "point": _keys(_P("position", "vec3"), *_LIGHT_COMMON)}
+RENDER_KEYS = _keys(
+    _P("width", "int", None, ">=1", "<=65536"), _P("height", "int", None, ">=1", "<=65536"),
+    _P("max_steps", "int", None, "1..100000"), _P("max_distance", "num", None, ">0"),
+    _P("epsilon", "word:pixel|num", None, ">0"), _P("ao", "num", None, "0..1"),
+    _P("samples", "int", None, ">=1", "<=4096"), _P("background", "vec3", None, ">=0"),
+    _P("precision", "word:float|double"), _P("reflections", "int", None, "0..16"))
+
+
+def check(program: ast.Program) -> CheckedScene:
+    """Check a parsed program; raise `SceneError` listing every error."""
+    return _Checker(program).run()
+
+
+def check_value(param: Parameter, key: str, value):
+    """Validate a render setting given from Python or the command line
+    (type and range, as in a file); raise ValueError saying what is wrong."""
+    checker = _Checker(ast.Program((), "<arguments>", ""))
+    choices = param.type[5:].split("|") if param.type.startswith("word:") else ()
+    if value in choices:
+        return value
+    if choices and "num" not in choices:
+        raise ValueError(f"'{key}' must be {' or '.join(repr(c) for c in choices)}, not {value!r}")
+    is_vector = param.type == "vec3"
+    try:
+        items = tuple(float(x) for x in value) if is_vector else (float(value),)
+    except (TypeError, ValueError):
+        raise ValueError(f"'{key}' must be {_TYPE_WORDS[param.type if is_vector else NUM]}, "
+                         f"not {value!r}") from None
+    if is_vector and len(items) != 3:
+        raise ValueError(f"'{key}' must have 3 components, not {len(items)}")
+    data = ir.Vec(tuple(ir.const(x) for x in items)) if is_vector else ir.const(items[0])
+    numeric = param if not choices else _P(param.name, "num", None, *param.constraints)
+    try:
+        checker.check_constraints(Span(1, 1, 1, 2), data, numeric, "render")
+    except _Failed:
+        raise ValueError(checker.errors[0].message) from None
+    if is_vector:
+        return items
+    return int(items[0]) if param.type == "int" else items[0]

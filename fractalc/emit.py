@@ -1,0 +1,311 @@
+"""Stage 4: distance IR -> OpenCL C source (`emit`).
+
+The source is one self-contained program: scene constants, the prelude, the
+library functions the scene calls (and nothing else), the generated
+`distance_estimate`, `material_id`, `surface_of` and `shade`, and the fixed
+template with the kernels. `Target.lanes` chooses one ray per work-item (1,
+for GPUs) or one ray per vector lane (8 or 16, for CPUs); `Target.double`
+makes every `real` a double. Output is deterministic: the same scene and
+target give the same text, which is the build cache's key.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from . import __version__, ir
+from .lower import POINT, SceneIR
+from .program import Light
+from .stdlib import library
+
+AMBIENT = 0.25          # ambient light, times the material's colour and AO
+AO_DELTA = 0.05         # spacing of the AO samples along the normal
+
+
+@dataclass(frozen=True)
+class Target:
+    lanes: int = 8          # rays per work-item: 1 (GPU) or 8/16 (CPU vector lanes)
+    double: bool = False    # `real` is double
+
+
+def literal(value: float) -> str:
+    """A float literal; `f`-suffixed (the double build strips the suffix)."""
+    if value != value or value in (float("inf"), float("-inf")):
+        raise ValueError(f"non-finite constant {value}")
+    text = repr(float(value))
+    return f"{text}f"
+
+
+# IR op -> C text of its (already emitted) arguments
+_C_OPS = {
+    "+": lambda a, b: f"({a} + {b})",
+    "-": lambda a, b: f"({a} - {b})",
+    "*": lambda a, b: f"({a} * {b})",
+    "/": lambda a, b: f"({a} / {b})",
+    "neg": lambda a: f"(-{a})",
+    "lt": lambda a, b: f"({a} < {b})",
+    "select": lambda c, t, f: f"SELECT({f}, {t}, {c})",
+    "abs": lambda a: f"fabs({a})",
+    "min": lambda a, b: f"fmin({a}, {b})",
+    "max": lambda a, b: f"fmax({a}, {b})",
+}
+_C_TYPES = {ir.REAL: "real", ir.VEC3: "vec3", ir.INT: "lane_int", ir.MASK: "mask"}
+_TEMP_PREFIX = {ir.REAL: "r", ir.VEC3: "q", ir.INT: "id", ir.MASK: "m"}
+_C_AXES = "xyz"
+
+
+class _FunctionWriter:
+    """Writes one C function computing an IR expression of the point: nodes
+    used more than once and library calls get a named temporary, the rest
+    is inlined."""
+
+    def __init__(self, root: ir.Expr):
+        self.root = root
+        self.nodes = ir.walk(root)
+        self.uses: dict = {}
+        for node in self.nodes:
+            for child in ir.children(node):
+                self.uses[child] = self.uses.get(child, 0) + 1
+        self.varying = set()
+        for node in self.nodes:
+            if isinstance(node, ir.Var) or any(c in self.varying for c in ir.children(node)):
+                self.varying.add(node)
+        self.text: dict = {}
+        self.lines: list[str] = []
+        self.counts: dict[str, int] = {}
+
+    def named(self, node) -> bool:
+        if isinstance(node, (ir.Const, ir.Param, ir.Var, ir.Vec)):
+            return False
+        if isinstance(node, ir.Comp):
+            return not isinstance(node.vector, (ir.Var, ir.Call))
+        return isinstance(node, ir.Call) or self.uses.get(node, 0) > 1
+
+    def argument(self, node) -> str:
+        """A value passed to a function: uniform scalars widened to `real`."""
+        text = self.text[node]
+        if isinstance(node, ir.Vec):
+            return text
+        if node not in self.varying and node.type == ir.REAL:
+            return f"(real){text}"
+        if node not in self.varying and node.type == ir.INT:
+            return f"(lane_int){text}"
+        return text
+
+    def expression(self, node) -> str:
+        if isinstance(node, ir.Const):
+            return f"{int(node.value)}" if node.type == ir.INT else literal(node.value)
+        if isinstance(node, ir.Param):
+            return f"params[{node.index}]"
+        if isinstance(node, ir.Var):
+            return node.name
+        if isinstance(node, ir.Comp):
+            return f"{self.text[node.vector]}.{_C_AXES[node.index]}"
+        if isinstance(node, ir.Vec):
+            items = node.items
+            if all(isinstance(c, ir.Comp) and c.index == i for i, c in enumerate(items)) \
+                    and len({c.vector for c in items}) == 1:
+                return self.text[items[0].vector]
+            return f"v3({', '.join(self.argument(c) for c in items)})"
+        if isinstance(node, ir.Call):
+            return f"{node.function}({', '.join(self.argument(a) for a in node.args)})"
+        if node.op in _C_OPS:
+            args = [self.argument(a) if node.op in ("select", "min", "max", "abs") else self.text[a]
+                    for a in node.args]
+            return _C_OPS[node.op](*args)
+        return f"{node.op}({', '.join(self.argument(a) for a in node.args)})"
+
+    def write(self, signature: str) -> str:
+        for node in self.nodes:
+            text = self.expression(node)
+            if self.named(node) and node is not self.root:
+                prefix = _TEMP_PREFIX[node.type]
+                name = f"{prefix}{self.counts.get(prefix, 0)}"
+                self.counts[prefix] = self.counts.get(prefix, 0) + 1
+                self.lines.append(f"    {_C_TYPES[node.type]} {name} = {text};")
+                text = name
+            self.text[node] = text
+        body = "\n".join(self.lines)
+        result = self.argument(self.root)
+        return f"{signature} {{\n{body}{chr(10) if body else ''}    return {result};\n}}"
+
+
+def _calls(root) -> list[str]:
+    return sorted({n.function for n in ir.walk(root) if isinstance(n, ir.Call)})
+
+
+def _vector(v) -> str:
+    return f"v3({', '.join(literal(x) for x in v)})"
+
+
+def _surface_function(scene_ir: SceneIR) -> str:
+    """Material properties by id, chosen per lane with selects."""
+    lines = ["typedef struct { vec3 albedo; real specular, shininess; } surface;", "",
+             "surface surface_of(lane_int id, __constant scalar *params) {"]
+    for index, material in enumerate(scene_ir.materials):
+        albedo = f"v3({', '.join(_uniform(x) for x in material.color.items)})"
+        specular, shininess = _uniform(material.specular), _uniform(material.shininess)
+        if index == 0:
+            lines.append(f"    surface s = {{ {albedo}, {specular}, {shininess} }};  // {material.name}")
+            continue
+        lines += [f"    {{   // {material.name}",
+                  f"        mask is = id == (lane_int){index};",
+                  f"        s.albedo = v3_select(s.albedo, {albedo}, is);",
+                  f"        s.specular = SELECT(s.specular, {specular}, is);",
+                  f"        s.shininess = SELECT(s.shininess, {shininess}, is);",
+                  "    }"]
+    lines += ["    return s;", "}"]
+    return "\n".join(lines)
+
+
+def _uniform(expr: ir.Expr) -> str:
+    """C text of a uniform (point-independent) expression, inlined."""
+    writer = _FunctionWriter(expr)
+    for node in writer.nodes:
+        writer.text[node] = writer.expression(node)
+    return f"(real){writer.text[expr]}"
+
+
+def _light_block(index: int, light: Light) -> tuple[str, set[str]]:
+    radiance = _vector(tuple(c * light.intensity for c in light.color))
+    lines = [f"    {{   // light {index}: {light.kind}, shadows {light.shadows}"]
+    if light.kind == "directional":
+        length = sum(c * c for c in light.vector) ** 0.5
+        to_light = tuple(-c / length for c in light.vector)
+        lines += [f"        vec3 to_light = {_vector(to_light)};",
+                  "        real reach = (real)MAX_DISTANCE;",
+                  f"        vec3 radiance = {radiance};"]
+    else:
+        lines += [f"        vec3 offset = v3_sub({_vector(light.vector)}, p);",
+                  "        real reach = v3_length(offset);",
+                  "        vec3 to_light = v3_scale(offset, 1.0f / reach);",
+                  f"        vec3 radiance = v3_scale({radiance}, 1.0f / (reach * reach));"]
+    needs = set()
+    if light.shadows == "hard":
+        lines.append("        radiance = v3_scale(radiance, hard_shadow(lifted, to_light, reach, threshold, hit, params));")
+        needs.add("hard_shadow")
+    elif light.shadows == "soft":
+        lines.append(f"        radiance = v3_scale(radiance, soft_shadow(lifted, to_light, reach, threshold, "
+                     f"{literal(light.softness)}, hit, params));")
+        needs.add("soft_shadow")
+    lines += ["        color = v3_add(color, blinn_phong(normal, to_light, to_eye, s.albedo, s.specular, "
+              "s.shininess, radiance));", "    }"]
+    return "\n".join(lines), needs
+
+
+def _shade_function(scene_ir: SceneIR) -> tuple[str, list[str]]:
+    """Blinn-Phong over every light, with shadows and AO only where asked."""
+    scene = scene_ir.scene
+    ao = scene.render.ao > 0
+    needs = {"blinn_phong"}
+    lines = ["vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, mask hit, __constant scalar *params) {",
+             "    surface s = surface_of(material_id(p, params), params);",
+             "    vec3 to_eye = v3(-dir.x, -dir.y, -dir.z);"]
+    if ao:
+        needs.add("ambient_occlusion")
+        lines.append(f"    real occlusion = ambient_occlusion(p, normal, {literal(AO_DELTA)}, "
+                     f"{literal(scene.render.ao)}, params);")
+        lines.append(f"    vec3 color = v3_scale(s.albedo, {literal(AMBIENT)} * occlusion);")
+    else:
+        lines.append(f"    vec3 color = v3_scale(s.albedo, {literal(AMBIENT)});")
+    if any(light.shadows != "none" for light in scene.lights):
+        lines.append("    vec3 lifted = v3_add(p, v3_scale(normal, 2.0f * threshold));")
+    if not scene.lights:
+        lines += ["    // no lights in the scene: a headlight, from the eye along the ray",
+                  "    color = v3_add(color, blinn_phong(normal, to_eye, to_eye, s.albedo, s.specular, "
+                  "s.shininess, v3(1.0f, 1.0f, 1.0f)));"]
+    for index, light in enumerate(scene.lights):
+        block, light_needs = _light_block(index, light)
+        lines.append(block)
+        needs |= light_needs
+    lines += ["    return color;", "}"]
+    return "\n".join(lines), sorted(needs)
+
+
+def _constants(scene_ir: SceneIR, target: Target) -> str:
+    render = scene_ir.scene.render
+    lanes = target.lanes
+    lane_index = "0.0f" if lanes == 1 else \
+        f"((real)({', '.join(literal(i) for i in range(lanes))}))"
+    pixel = render.epsilon == "pixel"
+    return "\n".join([
+        f"#define LANES {lanes}",
+        f"#define PRECISION_DOUBLE {int(target.double)}",
+        f"#define MAX_STEPS {render.max_steps}",
+        f"#define MAX_DISTANCE {literal(render.max_distance)}",
+        f"#define HIT_EPSILON_IS_PIXEL {int(pixel)}",
+        f"#define HIT_EPSILON {literal(0.0 if pixel else render.epsilon)}",
+        *(f"#define BACKGROUND_{c} {literal(v)}" for c, v in zip("RGB", render.background)),
+        f"#define LANE_INDEX {lane_index}",
+    ])
+
+
+_HEADER = """\
+// Generated by fractalc {version} from {file}. Standalone OpenCL C 1.2.
+//
+// Kernels (build with no options; `real` is {real} here, LANES = {lanes} rays
+// per work-item):
+//   render(__global float *out, __constant {scalar} *params, __constant {scalar} *camera,
+//          int width, int height, int x0, int y0, int pitch, int tile_height,
+//          int samples, uint seed)
+//     Renders the tile of tile_height rows starting at pixel (x0, y0) of a
+//     width x height image. Global size: (pitch / LANES, tile_height), where
+//     pitch is the tile width rounded up to a multiple of LANES. `out` gets 9
+//     planes of pitch * tile_height floats: R G B A Z N.x N.y N.z steps
+//     (linear colour; Z = +inf where the ray missed).
+//     camera: 13 values: position xyz, forward xyz, right xyz, up xyz (the
+//     orthonormal frame of LANGUAGE.md's camera model), tan(fov / 2).
+//     samples: anti-aliasing samples per pixel; seed: jitter seed.
+//   distance_at_points(__global const {scalar} *points, __global {scalar} *distances,
+//                      __constant {scalar} *params, int count)
+//     points: count x's, then count y's, then count z's; count a multiple of
+//     LANES; global size count / LANES.
+// params: {params}
+"""
+
+
+def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
+    """The complete OpenCL program for a lowered scene."""
+    lib = library()
+    scene = scene_ir.scene
+    distance = _FunctionWriter(scene_ir.distance).write(
+        "real distance_estimate(vec3 p, __constant scalar *params)")
+    material = _FunctionWriter(scene_ir.material_id).write(
+        "lane_int material_id(vec3 p, __constant scalar *params)")
+    shade, shading_needs = _shade_function(scene_ir)
+    scene_functions = lib.closure(sorted(set(_calls(scene_ir.distance)) | set(_calls(scene_ir.material_id))))
+    placed = {f.name for f in scene_functions}
+    shading_functions = [f for f in lib.closure(["estimate_normal"] + shading_needs) if f.name not in placed]
+
+    params = ", ".join(f"[{p.index}] {p.name} (default {p.default:g})" for p in scene.params) or "none"
+    scalar = "double" if target.double else "float"
+    parts = [
+        _HEADER.format(version=__version__, file=scene.file, real=scalar if target.lanes == 1
+                       else f"{scalar}{target.lanes}", lanes=target.lanes, scalar=scalar, params=params),
+        _constants(scene_ir, target),
+        lib.prelude,
+        _library_text(scene_functions),
+        "// ---- the scene " + "-" * 60,
+        distance, material, _surface_function(scene_ir),
+        _library_text(shading_functions),
+        shade,
+        lib.template,
+    ]
+    source = "\n\n".join(p.strip("\n") for p in parts if p) + "\n"
+    if target.double:
+        source = _DOUBLE_LITERAL.sub(r"\1", source)
+    return source
+
+
+_DOUBLE_LITERAL = re.compile(r"\b((?:\d+\.\d*|\.\d+)(?:[eE][+-]?\d+)?|\d+[eE][+-]?\d+)f\b")
+
+
+def _library_text(functions) -> str:
+    """Library functions in order, each file's header comment once."""
+    out, headers = [], set()
+    for f in functions:
+        if f.header and f.file not in headers:
+            headers.add(f.file)
+            out.append(f.header)
+        out.append(f.source)
+    return "\n\n".join(out)

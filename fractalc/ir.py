@@ -1,0 +1,206 @@
+"""The distance IR: a small typed expression DAG.
+
+Every value is a scalar (`real`, an int or a mask), except the results of
+library calls that return a `vec3` and the point variable itself; their
+components are taken with `Comp`. Vectors of the language are `Vec`
+containers of scalar expressions, so vector arithmetic lowers to scalar
+arithmetic that a later pass (dual numbers, a running Jacobian) can walk.
+
+Nodes are built through the functions at the bottom (`add`, `call`, ...),
+which fold constants: an expression with no `Param` or `Var` in it is a
+`Const` by the time it exists.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Union
+
+REAL, INT, MASK, VEC3 = "real", "int", "mask", "vec3"
+
+
+@dataclass(frozen=True)
+class Const:
+    value: float
+    type: str = REAL
+
+
+@dataclass(frozen=True)
+class Param:
+    """A scene `param`: a kernel argument, uniform over all rays."""
+    index: int
+    name: str
+    type: str = REAL
+
+
+@dataclass(frozen=True)
+class Var:
+    name: str
+    type: str
+
+
+@dataclass(frozen=True)
+class Op:
+    """A built-in operation: arithmetic, a math function, a comparison or
+    `select(condition, if_true, if_false)`."""
+    op: str
+    args: tuple["Expr", ...]
+    type: str = REAL
+
+
+@dataclass(frozen=True)
+class Call:
+    """A call of an OpenCL library function from `stdlib_cl/`."""
+    function: str
+    args: tuple["Arg", ...]
+    type: str
+
+
+@dataclass(frozen=True)
+class Comp:
+    """Component `index` (0..2) of a vec3-valued expression."""
+    vector: "Expr"
+    index: int
+    type: str = REAL
+
+
+@dataclass(frozen=True)
+class Vec:
+    """A vector of scalar expressions (2 to 4 components)."""
+    items: tuple["Expr", ...]
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+
+Expr = Union[Const, Param, Var, Op, Call, Comp]
+Arg = Union[Expr, Vec]
+
+
+# ---- folding ---------------------------------------------------------------
+
+def _python_round(x: float) -> float:
+    # OpenCL `round`: halfway cases away from zero
+    return math.copysign(math.floor(abs(x) + 0.5), x)
+
+
+# op name -> (arity, Python evaluator used for folding, result type)
+OPS: dict[str, tuple[int, Callable, str]] = {
+    "+": (2, lambda a, b: a + b, REAL),
+    "-": (2, lambda a, b: a - b, REAL),
+    "*": (2, lambda a, b: a * b, REAL),
+    "/": (2, lambda a, b: a / b, REAL),
+    "neg": (1, lambda a: -a, REAL),
+    "sin": (1, math.sin, REAL), "cos": (1, math.cos, REAL), "tan": (1, math.tan, REAL),
+    "asin": (1, math.asin, REAL), "acos": (1, math.acos, REAL), "atan": (1, math.atan, REAL),
+    "atan2": (2, math.atan2, REAL),
+    "sqrt": (1, math.sqrt, REAL), "abs": (1, abs, REAL),
+    "min": (2, min, REAL), "max": (2, max, REAL),
+    "pow": (2, math.pow, REAL), "exp": (1, math.exp, REAL), "log": (1, math.log, REAL),
+    "floor": (1, math.floor, REAL), "round": (1, _python_round, REAL),
+    "clamp": (3, lambda x, lo, hi: min(max(x, lo), hi), REAL),
+    "mix": (3, lambda a, b, t: a + (b - a) * t, REAL),
+    "radians": (1, math.radians, REAL), "degrees": (1, math.degrees, REAL),
+    "lt": (2, lambda a, b: float(a < b), MASK),
+    "select": (3, lambda c, a, b: a if c else b, REAL),
+}
+
+
+def is_const(e) -> bool:
+    return isinstance(e, Const)
+
+
+def op(name: str, *args: Expr) -> Expr:
+    """Build `Op(name, args)`, folded when every argument is constant.
+    Raises ValueError/ZeroDivisionError/OverflowError for a constant
+    argument outside the function's domain."""
+    arity, evaluate, result_type = OPS[name]
+    assert len(args) == arity, (name, args)
+    if all(isinstance(a, Const) for a in args):
+        value = float(evaluate(*(a.value for a in args)))
+        if math.isnan(value) or math.isinf(value):
+            raise ValueError(f"{name} gives a non-finite result")
+        return Const(value, INT if result_type == MASK else REAL)
+    folded = _simplify(name, args)
+    if folded is not None:
+        return folded
+    if name == "select":
+        result_type = args[1].type
+    return Op(name, tuple(args), result_type)
+
+
+def _simplify(name: str, args: tuple) -> Expr | None:
+    """Algebraic identities with one constant operand (x+0, x*1, ...)."""
+    if name in ("+", "-") and is_const(args[1]) and args[1].value == 0.0:
+        return args[0]
+    if name == "+" and is_const(args[0]) and args[0].value == 0.0:
+        return args[1]
+    if name in ("*", "/") and is_const(args[1]) and args[1].value == 1.0:
+        return args[0]
+    if name == "*" and is_const(args[0]) and args[0].value == 1.0:
+        return args[1]
+    if name == "*" and any(is_const(a) and a.value == 0.0 for a in args):
+        return Const(0.0)   # the point's coordinates are finite
+    if name == "-" and is_const(args[0]) and args[0].value == 0.0:
+        return op("neg", args[1])
+    if name == "select" and is_const(args[0]):
+        return args[1] if args[0].value else args[2]
+    if name == "select" and args[1] == args[2]:
+        return args[1]
+    return None
+
+
+def const(value: float) -> Const:
+    return Const(float(value))
+
+
+def add(a, b): return op("+", a, b)
+def sub(a, b): return op("-", a, b)
+def mul(a, b): return op("*", a, b)
+def div(a, b): return op("/", a, b)
+def neg(a): return op("neg", a)
+
+
+def call(function: str, args, type: str = REAL) -> Expr:
+    return Call(function, tuple(args), type)
+
+
+def components(e: Expr | Vec) -> tuple[Expr, ...]:
+    """The three scalar components of a vec3 value."""
+    if isinstance(e, Vec):
+        return e.items
+    return tuple(Comp(e, i) for i in range(3))
+
+
+def vec(*items: Expr) -> Vec:
+    return Vec(tuple(items))
+
+
+# ---- walking ---------------------------------------------------------------
+
+def children(e) -> tuple:
+    if isinstance(e, (Op, Call)):
+        return e.args
+    if isinstance(e, Comp):
+        return (e.vector,)
+    if isinstance(e, Vec):
+        return e.items
+    return ()
+
+
+def walk(root):
+    """Every distinct node reachable from `root`, children before parents."""
+    seen: set = set()
+    order: list = []
+    stack = [(root, False)]
+    while stack:
+        node, expanded = stack.pop()
+        if expanded:
+            order.append(node)
+            continue
+        if node in seen:
+            continue
+        seen.add(node)
+        stack.append((node, True))
+        stack.extend((c, False) for c in reversed(children(node)))
+    return order

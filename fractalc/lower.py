@@ -1,0 +1,127 @@
+"""Stage 3: checked scene -> distance IR (`lower`).
+
+A shape becomes two IR expressions of the point variable `p`: its distance
+estimate and the id of the material nearest to `p`. Point transforms
+(translate, rotate, repeat, scale) are scalar IR arithmetic on the point's
+components; library shapes and warps are `ir.Call`s. Constants fold as the
+IR is built; params stay symbolic.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from . import ir
+from .program import (DEFAULT_MATERIAL, CheckedScene, Combination, Material, Primitive, Shape,
+                      Transformed, WithMaterial)
+
+POINT = ir.Var("p", ir.VEC3)
+
+Point = tuple[ir.Expr, ir.Expr, ir.Expr]
+
+
+@dataclass(frozen=True)
+class SceneIR:
+    scene: CheckedScene
+    distance: ir.Expr            # real, of POINT
+    material_id: ir.Expr         # int, of POINT
+    materials: tuple[Material, ...]   # indexed by material id
+
+
+def _material_ids(scene: CheckedScene) -> dict[str, int]:
+    return {name: i for i, name in enumerate(scene.materials)}
+
+
+def _smooth_or_plain(plain: str, smooth_function: str, a, b, k: ir.Expr) -> ir.Expr:
+    if ir.is_const(k) and k.value == 0.0:
+        return ir.op(plain, a, b)
+    return ir.call(smooth_function, (a, b, k))
+
+
+def _rotated(point: Point, axis: ir.Vec, degrees: ir.Expr) -> Point:
+    """R^T p for R the right-handed rotation about `axis` by `degrees`
+    (Rodrigues): the shape turns by R, so its field is read at R^T p."""
+    length = ir.op("sqrt", ir.add(ir.add(ir.mul(axis.items[0], axis.items[0]),
+                                         ir.mul(axis.items[1], axis.items[1])),
+                                  ir.mul(axis.items[2], axis.items[2])))
+    kx, ky, kz = (ir.div(a, length) for a in axis.items)
+    angle = ir.mul(degrees, ir.const(math.pi / 180.0))
+    c, s = ir.op("cos", angle), ir.op("sin", angle)
+    t = ir.sub(ir.const(1.0), c)
+    x, y, z = point
+    k_dot_p = ir.add(ir.add(ir.mul(kx, x), ir.mul(ky, y)), ir.mul(kz, z))
+    k_cross_p = (ir.sub(ir.mul(ky, z), ir.mul(kz, y)),
+                 ir.sub(ir.mul(kz, x), ir.mul(kx, z)),
+                 ir.sub(ir.mul(kx, y), ir.mul(ky, x)))
+    # rotation by -angle: p cos - (k x p) sin + k (k.p)(1 - cos)
+    return tuple(ir.add(ir.sub(ir.mul(pi, c), ir.mul(cross, s)), ir.mul(ki, ir.mul(k_dot_p, t)))
+                 for pi, cross, ki in zip(point, k_cross_p, (kx, ky, kz)))
+
+
+def _repeated(point: Point, period: ir.Vec) -> Point:
+    """p - c round(p / c) on each axis whose period c is not a literal 0."""
+    return tuple(p if ir.is_const(c) and c.value == 0.0
+                 else ir.sub(p, ir.mul(c, ir.op("round", ir.div(p, c))))
+                 for p, c in zip(point, period.items))
+
+
+class _Lowerer:
+    def __init__(self, scene: CheckedScene):
+        self.ids = _material_ids(scene)
+
+    def shape(self, s: Shape, point: Point, material: int) -> tuple[ir.Expr, ir.Expr]:
+        """(distance, material id) of shape `s` at `point`."""
+        if isinstance(s, Primitive):
+            args = (ir.Vec(point),) + s.args
+            return ir.call(s.signature.function, args), ir.Const(float(material), ir.INT)
+        if isinstance(s, WithMaterial):
+            return self.shape(s.shape, point, self.ids[s.material])
+        if isinstance(s, Combination):
+            return self.combination(s, point, material)
+        return self.transformed(s, point, material)
+
+    def combination(self, s: Combination, point: Point, material: int):
+        lowered = [self.shape(child, point, material) for child in s.shapes]
+        distance, ids = lowered[0]
+        for d, i in lowered[1:]:
+            if s.kind == "union":
+                ids = ir.op("select", ir.op("lt", d, distance), i, ids)
+                distance = _smooth_or_plain("min", "smooth_min", distance, d, s.smooth)
+            elif s.kind == "intersect":
+                ids = ir.op("select", ir.op("lt", distance, d), i, ids)
+                distance = _smooth_or_plain("max", "smooth_max", distance, d, s.smooth)
+            else:   # subtract: the cut face keeps the first shape's material
+                distance = _smooth_or_plain("max", "smooth_max", distance, ir.neg(d), s.smooth)
+        return distance, ids
+
+    def transformed(self, s: Transformed, point: Point, material: int):
+        kind, args = s.kind, s.args
+        if kind == "translate":
+            return self.shape(s.shape, tuple(ir.sub(p, v) for p, v in zip(point, args[0].items)), material)
+        if kind == "rotate":
+            return self.shape(s.shape, _rotated(point, args[0], args[1]), material)
+        if kind == "repeat":
+            return self.shape(s.shape, _repeated(point, args[0]), material)
+        if kind == "scale":
+            factor = args[0]
+            d, ids = self.shape(s.shape, tuple(ir.div(p, factor) for p in point), material)
+            return ir.mul(d, factor), ids
+        if kind in ("twist", "bend"):
+            rate = args[0]
+            warped = ir.call(f"{kind}_point", (ir.Vec(point), rate), ir.VEC3)
+            d, ids = self.shape(s.shape, ir.components(warped), material)
+            return ir.div(d, ir.call(f"{kind}_lipschitz", (ir.Vec(point), rate))), ids
+        d, ids = self.shape(s.shape, point, material)
+        if kind == "round":
+            return ir.sub(d, args[0]), ids
+        if kind == "onion":
+            return ir.sub(ir.op("abs", d), args[0]), ids
+        raise ValueError(f"unknown transform {kind!r}")
+
+
+def lower(scene: CheckedScene) -> SceneIR:
+    """Lower the scene's shape to distance and material-id expressions."""
+    lowerer = _Lowerer(scene)
+    distance, material_id = lowerer.shape(scene.shape, ir.components(POINT),
+                                          lowerer.ids[DEFAULT_MATERIAL])
+    return SceneIR(scene, distance, material_id, tuple(scene.materials.values()))

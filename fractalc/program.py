@@ -1,0 +1,120 @@
+"""The checked scene: plain immutable values that `check` produces and the
+later stages read. Numbers that may depend on params are IR expressions
+(`ir.Const` once folded); the camera, lights and render settings are
+constants."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Union
+
+from . import ir
+from .errors import Span
+from .stdlib import Signature
+
+Vector3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class ParamInfo:
+    name: str
+    index: int
+    default: float
+    low: float | None
+    high: float | None
+    span: Span
+
+
+# ---- shapes ----------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Primitive:
+    """A library shape or fractal with its arguments in signature order."""
+    signature: Signature
+    args: tuple[ir.Arg, ...]
+    span: Span
+
+
+@dataclass(frozen=True)
+class Combination:
+    kind: str                   # union | intersect | subtract
+    shapes: tuple["Shape", ...]
+    smooth: ir.Expr
+    span: Span
+
+
+@dataclass(frozen=True)
+class Transformed:
+    kind: str                   # a key of stdlib.TRANSFORMS other than material/color
+    shape: "Shape"
+    args: tuple[ir.Arg, ...]
+    span: Span
+
+
+@dataclass(frozen=True)
+class WithMaterial:
+    shape: "Shape"
+    material: str               # a key of CheckedScene.materials
+    span: Span
+
+
+Shape = Union[Primitive, Combination, Transformed, WithMaterial]
+
+
+# ---- the rest of the scene -------------------------------------------------
+
+@dataclass(frozen=True)
+class Material:
+    name: str
+    color: ir.Vec
+    specular: ir.Expr
+    shininess: ir.Expr
+    reflectivity: ir.Expr
+
+
+DEFAULT_MATERIAL = "default"
+
+
+@dataclass(frozen=True)
+class Camera:
+    position: Vector3 = (0.0, -5.0, 2.0)
+    target: Vector3 = (0.0, 0.0, 0.0)
+    up: Vector3 = (0.0, 0.0, 1.0)
+    fov: float = 45.0
+    aperture: float = 0.0
+    focus: float | None = None
+
+
+@dataclass(frozen=True)
+class Light:
+    kind: str                   # directional | point
+    vector: Vector3             # direction the light travels, or position
+    color: Vector3 = (1.0, 1.0, 1.0)
+    intensity: float = 1.0
+    shadows: str = "hard"       # none | hard | soft
+    softness: float = 16.0
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    width: int = 640
+    height: int = 480
+    max_steps: int = 256
+    max_distance: float = 50.0
+    epsilon: float | str = "pixel"   # a number, or "pixel"
+    ao: float = 0.0
+    samples: int = 1
+    background: Vector3 = (0.05, 0.05, 0.08)
+    precision: str = "float"
+    reflections: int = 0
+
+
+@dataclass(frozen=True)
+class CheckedScene:
+    file: str
+    source: str
+    params: tuple[ParamInfo, ...]
+    materials: dict = field(hash=False)      # name -> Material, DEFAULT_MATERIAL first
+    shape: Shape = None
+    camera: Camera = Camera()
+    lights: tuple[Light, ...] = ()           # empty: a headlight
+    render: RenderSettings = RenderSettings()

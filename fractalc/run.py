@@ -1,0 +1,132 @@
+"""Stage 6: run a built program (`render`, `distances`).
+
+The image is rendered in tiles: no single launch covers a large frame (GPU
+watchdogs), host memory besides the output stays O(tile), and progress is
+reported per tile.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .build import Device
+from .errors import RenderError
+from .program import Camera
+
+PLANES = ("R", "G", "B", "A", "Z", "N.x", "N.y", "N.z", "steps")
+TILE_WIDTH, TILE_HEIGHT = 256, 64
+
+
+@dataclass(frozen=True)
+class Frame:
+    """What a render launch needs besides the program: image size, samples,
+    jitter seed, and the camera as the kernel's 13-value block."""
+    width: int
+    height: int
+    samples: int
+    seed: int
+    camera: tuple[float, ...]
+
+
+def camera_block(camera: Camera) -> tuple[float, ...]:
+    """position, forward, right, up', tan(fov/2): LANGUAGE.md's camera model."""
+    position = np.array(camera.position, dtype=np.float64)
+    forward = np.array(camera.target, dtype=np.float64) - position
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, np.array(camera.up, dtype=np.float64))
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    tan_half_fov = math.tan(math.radians(camera.fov) / 2.0)
+    return tuple(float(x) for x in (*position, *forward, *right, *up, tan_half_fov))
+
+
+def _scalar(double: bool):
+    return np.float64 if double else np.float32
+
+
+def _constant_buffer(device: Device, values, double: bool):
+    import pyopencl as cl
+    data = np.asarray(list(values) or [0.0], dtype=_scalar(double))
+    return cl.Buffer(device.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=data)
+
+
+def _guard(action: str):
+    """Turn OpenCL runtime failures into RenderError with one-line causes."""
+    import pyopencl as cl
+
+    class _Guard:
+        def __enter__(self):
+            return self
+
+        def __exit__(self, kind, error, trace):
+            if isinstance(error, cl.MemoryError) or (
+                    isinstance(error, cl.Error) and "OUT_OF" in str(error)):
+                raise RenderError(f"out of memory while {action}") from None
+            if isinstance(error, cl.Error):
+                raise RenderError(f"OpenCL failed while {action}: {error}") from None
+            return False
+
+    return _Guard()
+
+
+def render(program, device: Device, frame: Frame, params, lanes: int, double: bool,
+           progress: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
+    """Render `frame`; returns one (H, W) float32 array per plane name."""
+    import pyopencl as cl
+    width, height = frame.width, frame.height
+    planes = {name: np.empty((height, width), dtype=np.float32) for name in PLANES}
+    kernel = cl.Kernel(program, "render")
+    with _guard("rendering"):
+        params_buffer = _constant_buffer(device, params, double)
+        camera_buffer = _constant_buffer(device, frame.camera, double)
+        tile_pitch = math.ceil(min(TILE_WIDTH, width) / lanes) * lanes
+        tile_rows = min(TILE_HEIGHT, height)
+        host = np.empty((len(PLANES), tile_rows, tile_pitch), dtype=np.float32)
+        out = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY, host.nbytes)
+        for y0 in range(0, height, tile_rows):
+            rows = min(tile_rows, height - y0)
+            for x0 in range(0, width, tile_pitch):
+                columns = min(tile_pitch, width - x0)
+                pitch = math.ceil(columns / lanes) * lanes
+                kernel(device.queue, (pitch // lanes, rows), None, out, params_buffer, camera_buffer,
+                       np.int32(width), np.int32(height), np.int32(x0), np.int32(y0),
+                       np.int32(pitch), np.int32(rows), np.int32(frame.samples), np.uint32(frame.seed))
+                tile = host.reshape(-1)[:len(PLANES) * pitch * rows].reshape(len(PLANES), rows, pitch)
+                cl.enqueue_copy(device.queue, tile, out)
+                for plane, name in zip(tile, PLANES):
+                    planes[name][y0:y0 + rows, x0:x0 + columns] = plane[:, :columns]
+                if progress:
+                    progress(rows * columns)
+    return planes
+
+
+def distances(program, device: Device, points: np.ndarray, params, lanes: int, double: bool) -> np.ndarray:
+    """The scene's distance estimate at each of the (N, 3) `points`."""
+    import pyopencl as cl
+    points = np.asarray(points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"points must have shape (N, 3), not {points.shape}")
+    count = len(points)
+    padded = max(lanes, math.ceil(count / lanes) * lanes)
+    planar = np.zeros((3, padded), dtype=_scalar(double))
+    planar[:, :count] = points.T
+    result = np.empty(padded, dtype=_scalar(double))
+    with _guard("evaluating distances"):
+        flags = cl.mem_flags
+        points_buffer = cl.Buffer(device.context, flags.READ_ONLY | flags.COPY_HOST_PTR, hostbuf=planar)
+        out = cl.Buffer(device.context, flags.WRITE_ONLY, result.nbytes)
+        cl.Kernel(program, "distance_at_points")(device.queue, (padded // lanes,), None, points_buffer, out,
+                                   _constant_buffer(device, params, double), np.int32(padded))
+        cl.enqueue_copy(device.queue, result, out)
+    return result[:count].astype(np.float64)
+
+
+def terminal_progress(total_pixels: int):
+    """A progress bar on stderr for renders that take over a second."""
+    from tqdm import tqdm
+    return tqdm(total=total_pixels, unit="px", unit_scale=True, delay=1.0, leave=False,
+                disable=not sys.stderr.isatty(), desc="rendering")

@@ -1,0 +1,208 @@
+"""The OpenCL library in `stdlib_cl/` and the signatures of the language.
+
+Each library file is split into its functions. A function whose definition
+is preceded by a line `//: KIND NAME(ARG, ...)` is callable from the language
+under NAME; that line is the one source of its signature:
+
+    //: shape box(size: size = 1 >0)
+
+ARG is `name: type [= default] [constraint ...]`, with types `num`, `int`,
+`vec3`, `vec4` and `size` (a number or a vec3; a number means all three),
+and constraints `>X`, `>=X`, `<=X`, `<X`, `A..B` (inclusive), `nonzero`, or
+`<=other_arg`. The language-level forms that are not library functions
+(combinators, transforms, math) are tabled below.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from functools import lru_cache
+
+from .resources import resource_dir
+
+PRELUDE = "prelude.cl"
+TEMPLATE = "raymarch.cl"
+
+
+@dataclass(frozen=True)
+class Parameter:
+    name: str
+    type: str                      # num | int | vec3 | vec4 | size | shape | material | rgb
+    default: float | tuple | None  # None: required
+    constraints: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Signature:
+    kind: str                      # shape | fractal | combinator | transform
+    name: str
+    parameters: tuple[Parameter, ...]
+    function: str = ""             # the OpenCL function implementing it
+    variadic: bool = False         # combinators take any number of shapes first
+
+
+@dataclass(frozen=True)
+class Function:
+    name: str
+    source: str                    # the definition with its comment lines
+    header: str                    # the file's leading comment, emitted once
+    file: str
+    calls: tuple[str, ...]         # library functions it calls
+
+
+_ANNOTATION = re.compile(r"^//:\s*(\w+)\s+(\w+)\((.*)\)\s*$")
+_DEFINITION = re.compile(r"^[A-Za-z_][\w ]*?\b(\w+)\s*\(")
+_IDENTIFIER = re.compile(r"\b[A-Za-z_]\w*\b")
+
+
+def _split_top_level(text: str) -> list[str]:
+    parts, depth, current = [], 0, ""
+    for ch in text:
+        if ch == "," and depth == 0:
+            parts.append(current)
+            current = ""
+            continue
+        depth += ch in "(["
+        depth -= ch in ")]"
+        current += ch
+    if current.strip():
+        parts.append(current)
+    return [p.strip() for p in parts]
+
+
+def _parse_value(text: str) -> float | tuple:
+    text = text.strip()
+    if text.startswith("("):
+        return tuple(float(x) for x in _split_top_level(text[1:-1]))
+    return float(text)
+
+
+def _parse_parameter(text: str) -> Parameter:
+    name, rest = (s.strip() for s in text.split(":", 1))
+    match = re.match(r"(\w+)\s*(?:=\s*(\([^)]*\)|[-+.\deE]+))?\s*(.*)$", rest)
+    type_, default, constraints = match.groups()
+    return Parameter(name, type_, _parse_value(default) if default else None,
+                     tuple(constraints.split()))
+
+
+def _parse_file(path, file_name: str) -> tuple[list[Function], dict[str, Signature]]:
+    lines = path.read_text().splitlines()
+    header: list[str] = []
+    i = 0
+    while i < len(lines) and lines[i].startswith("//") and not lines[i].startswith("//:"):
+        header.append(lines[i])
+        i += 1
+    if i < len(lines) and lines[i].strip():
+        header = []   # no blank line after it: the comment belongs to the first function
+        i = 0
+    functions, signatures, pending = [], {}, []
+    depth, body, name = 0, [], None
+    for line in lines[i:]:
+        if name is None:
+            if not line.strip():
+                pending = []
+                continue
+            if line.startswith("//"):
+                pending.append(line)
+                continue
+            match = _DEFINITION.match(line)
+            if not match:
+                raise ValueError(f"{file_name}: cannot read library line {line!r}")
+            name, body = match.group(1), pending + [line]
+            pending = []
+        else:
+            body.append(line)
+        depth += line.count("{") - line.count("}")
+        if depth == 0 and "}" in line:
+            source = "\n".join(body)
+            for comment in body:
+                annotation = _ANNOTATION.match(comment)
+                if annotation:
+                    kind, lang_name, args = annotation.groups()
+                    params = tuple(_parse_parameter(a) for a in _split_top_level(args))
+                    signatures[lang_name] = Signature(kind, lang_name, params, name)
+            functions.append(Function(name, source, "\n".join(header), file_name, ()))
+            name = None
+    return functions, signatures
+
+
+@dataclass(frozen=True)
+class Library:
+    functions: dict[str, Function]
+    signatures: dict[str, Signature]
+    prelude: str
+    template: str
+
+    def closure(self, roots) -> list[Function]:
+        """The functions `roots` need, each after the ones it calls."""
+        order: list[Function] = []
+        placed: set[str] = set()
+
+        def visit(name: str, trail: tuple = ()):
+            if name in placed or name in trail:
+                return
+            for callee in self.functions[name].calls:
+                visit(callee, trail + (name,))
+            placed.add(name)
+            order.append(self.functions[name])
+
+        for root in roots:
+            visit(root)
+        return order
+
+
+@lru_cache(maxsize=1)
+def library() -> Library:
+    root = resource_dir("stdlib_cl")
+    functions: dict[str, Function] = {}
+    signatures: dict[str, Signature] = {}
+    for path in sorted(root.glob("*/*.cl")):
+        file_name = str(path.relative_to(root))
+        found, sigs = _parse_file(path, file_name)
+        functions.update((f.name, f) for f in found)
+        signatures.update(sigs)
+    names = set(functions)
+    with_calls = {}
+    for f in functions.values():
+        body = re.sub(r"//[^\n]*", "", f.source)
+        called = {m for m in _IDENTIFIER.findall(body) if m in names and m != f.name}
+        with_calls[f.name] = Function(f.name, f.source, f.header, f.file, tuple(sorted(called)))
+    return Library(with_calls, signatures, (root / PRELUDE).read_text(), (root / TEMPLATE).read_text())
+
+
+# ---- language forms that are not library functions -------------------------
+
+def _p(name, type_, default=None, *constraints):
+    return Parameter(name, type_, default, tuple(constraints))
+
+
+COMBINATORS = {
+    "union": Signature("combinator", "union", (_p("smooth", "num", 0.0, ">=0"),), variadic=True),
+    "intersect": Signature("combinator", "intersect", (_p("smooth", "num", 0.0, ">=0"),), variadic=True),
+    "subtract": Signature("combinator", "subtract", (_p("smooth", "num", 0.0, ">=0"),), variadic=True),
+}
+
+TRANSFORMS = {
+    "translate": Signature("transform", "translate", (_p("offset", "vec3"),)),
+    "rotate": Signature("transform", "rotate", (_p("axis", "vec3", None, "nonzero"), _p("degrees", "num"))),
+    "scale": Signature("transform", "scale", (_p("factor", "num", None, ">0"),)),
+    "repeat": Signature("transform", "repeat", (_p("period", "size", None, ">=0"),)),
+    "round": Signature("transform", "round", (_p("radius", "num", None, ">=0"),)),
+    "onion": Signature("transform", "onion", (_p("thickness", "num", None, ">0"),)),
+    "twist": Signature("transform", "twist", (_p("rate", "num"),)),
+    "bend": Signature("transform", "bend", (_p("rate", "num"),)),
+    "material": Signature("transform", "material", (_p("material", "material"),)),
+    "color": Signature("transform", "color", (_p("rgb", "vec3"),)),
+}
+
+# math function -> (arity, how arguments combine): "map" applies per
+# component (numbers broadcast), the others take and give what they say.
+MATH = {
+    **{name: (1, "map") for name in
+       ("sin", "cos", "tan", "asin", "acos", "atan", "sqrt", "abs", "exp", "log",
+        "floor", "radians", "degrees")},
+    "atan2": (2, "map"), "min": (2, "map"), "max": (2, "map"), "pow": (2, "map"),
+    "clamp": (3, "map"), "mix": (3, "map"),
+    "length": (1, "vector->num"), "normalize": (1, "vector->vector"),
+    "dot": (2, "vector,vector->num"), "cross": (2, "vec3,vec3->vec3"),
+}

@@ -1,0 +1,71 @@
+// The types every library function is written in, so that one source serves
+// one ray per work-item (LANES 1, GPUs) and one ray per vector lane (LANES
+// 8/16, CPUs), in float or double. The emitter defines LANES and
+// PRECISION_DOUBLE above this file.
+//   scalar   a uniform number (params, camera): float or double
+//   real     a number per ray: scalar, or a vector of LANES scalars
+//   mask     a per-ray truth value (comparison result): int, int8, long8, ...
+//   lane_int a per-ray integer of the mask's width (material ids, counters)
+//   vec3     a point or direction per ray (three reals)
+#define CONCAT_(a, b) a##b
+#define CONCAT(a, b) CONCAT_(a, b)
+
+#if PRECISION_DOUBLE
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+typedef double scalar;
+#define SCALAR_NAME double
+#define MASK_ELEMENT long
+#define SCALAR_MIN_EPSILON 1e-12
+#else
+typedef float scalar;
+#define SCALAR_NAME float
+#define MASK_ELEMENT int
+#define SCALAR_MIN_EPSILON 1e-6f
+#endif
+
+#if LANES == 1
+typedef scalar real;
+typedef int mask;
+typedef int lane_int;
+typedef uint lane_uint;
+#define MASK_TRUE 1
+#define ANY(m) (m)
+#define ALL(m) (m)
+#define SELECT(if_false, if_true, m) ((m) ? (if_true) : (if_false))
+#define TO_REAL(x) ((real)(x))
+#define TO_FLOAT(x) ((float)(x))
+#define TO_UINT(x) ((uint)(x))
+#define LOAD_LANES(i, ptr) ((ptr)[i])
+#define STORE_LANES(v, i, ptr) ((ptr)[i] = (v))
+#else
+#define REAL_TYPE CONCAT(SCALAR_NAME, LANES)
+typedef REAL_TYPE real;
+typedef CONCAT(MASK_ELEMENT, LANES) mask;
+typedef mask lane_int;
+typedef CONCAT(uint, LANES) lane_uint;
+#define MASK_TRUE ((mask)(-1))
+#define ANY(m) any(m)
+#define ALL(m) all(m)
+#define SELECT(if_false, if_true, m) select((if_false), (if_true), (m))
+#define TO_REAL(x) CONCAT(convert_, REAL_TYPE)(x)
+#define TO_FLOAT(x) CONCAT(convert_float, LANES)(x)
+#define TO_UINT(x) CONCAT(convert_uint, LANES)(x)
+#define LOAD_LANES(i, ptr) CONCAT(vload, LANES)((i), (ptr))
+#define STORE_LANES(v, i, ptr) CONCAT(vstore, LANES)((v), (i), (ptr))
+#endif
+
+typedef struct { real x, y, z; } vec3;
+
+vec3 v3(real x, real y, real z) { vec3 v = { x, y, z }; return v; }
+vec3 v3_add(vec3 a, vec3 b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
+vec3 v3_sub(vec3 a, vec3 b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
+vec3 v3_mul(vec3 a, vec3 b) { return v3(a.x * b.x, a.y * b.y, a.z * b.z); }
+vec3 v3_scale(vec3 a, real s) { return v3(a.x * s, a.y * s, a.z * s); }
+vec3 v3_abs(vec3 a) { return v3(fabs(a.x), fabs(a.y), fabs(a.z)); }
+real v3_dot(vec3 a, vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+real v3_length(vec3 a) { return sqrt(v3_dot(a, a)); }
+vec3 v3_normalize(vec3 a) { return v3_scale(a, rsqrt(max(v3_dot(a, a), (real)1e-30f))); }
+vec3 v3_select(vec3 if_false, vec3 if_true, mask m) {
+    return v3(SELECT(if_false.x, if_true.x, m), SELECT(if_false.y, if_true.y, m),
+              SELECT(if_false.z, if_true.z, m));
+}

@@ -1,0 +1,165 @@
+// The fixed ray-marching template (sphere tracing, Hart 1996).
+// The generated code above this file defines:
+//   real distance_estimate(vec3 p, __constant scalar *params);
+//   vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, mask hit, __constant scalar *params);
+//   MAX_STEPS, MAX_DISTANCE, HIT_EPSILON (0 = pixel footprint), BACKGROUND, LANE_INDEX.
+
+// Camera block (`camera` kernel argument), see LANGUAGE.md "Camera model".
+#define CAMERA_POSITION 0
+#define CAMERA_FORWARD 3
+#define CAMERA_RIGHT 6
+#define CAMERA_UP 9
+#define CAMERA_TAN_HALF_FOV 12
+#define CAMERA_SIZE 13
+
+// Output planes, each `pitch * tile_height` floats.
+#define PLANE_R 0
+#define PLANE_G 1
+#define PLANE_B 2
+#define PLANE_A 3
+#define PLANE_Z 4
+#define PLANE_NX 5
+#define PLANE_NY 6
+#define PLANE_NZ 7
+#define PLANE_STEPS 8
+#define PLANE_COUNT 9
+
+// Hart's clarity function: the hit threshold grows with t by the angle one
+// pixel subtends, or stays the scene's constant epsilon.
+real hit_threshold(real t, scalar pixel_angle) {
+#if HIT_EPSILON_IS_PIXEL
+    return max(t * pixel_angle, (real)SCALAR_MIN_EPSILON);
+#else
+    return (real)HIT_EPSILON;
+#endif
+}
+
+typedef struct {
+    real t;        // ray distance of the hit
+    mask hit;
+    real steps;    // distance evaluations taken
+} march_result;
+
+// Sphere tracing of LANES rays at once; a lane stops on a hit (distance
+// below the threshold, or <= 0 at the start: a camera inside a solid hits at
+// t = 0), past MAX_DISTANCE, or after MAX_STEPS.
+march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle,
+                   __constant scalar *params) {
+    march_result r = { (real)0.0f, (mask)0, (real)0.0f };
+    for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
+        real d = distance_estimate(v3_add(origin, v3_scale(dir, r.t)), params);
+        r.steps = r.steps + SELECT((real)0.0f, (real)1.0f, active);
+        mask close = (d < hit_threshold(r.t, pixel_angle)) | (d <= 0.0f);
+        r.hit = r.hit | (active & close);
+        active = active & !close;
+        r.t = SELECT(r.t, r.t + d, active);
+        active = active & (r.t < (real)MAX_DISTANCE);
+    }
+    return r;
+}
+
+vec3 camera_ray(__constant scalar *camera, real x, real y) {
+    vec3 forward = v3(camera[CAMERA_FORWARD], camera[CAMERA_FORWARD + 1], camera[CAMERA_FORWARD + 2]);
+    vec3 right = v3(camera[CAMERA_RIGHT], camera[CAMERA_RIGHT + 1], camera[CAMERA_RIGHT + 2]);
+    vec3 up = v3(camera[CAMERA_UP], camera[CAMERA_UP + 1], camera[CAMERA_UP + 2]);
+    return v3_normalize(v3_add(forward, v3_add(v3_scale(right, x), v3_scale(up, y))));
+}
+
+// The ray through sub-pixel position (px, py) (pixel units, from the top-left).
+vec3 pixel_ray(__constant scalar *camera, int width, int height, real px, real py) {
+    scalar tan_half_fov = camera[CAMERA_TAN_HALF_FOV];
+    real x = (2.0f * px / (scalar)width - 1.0f) * ((scalar)width / (scalar)height) * tan_half_fov;
+    real y = (1.0f - 2.0f * py / (scalar)height) * tan_half_fov;
+    return camera_ray(camera, x, y);
+}
+
+// A per-lane hash (PCG), for stratified jitter that is the same on every run.
+lane_uint hash_lanes(lane_uint v) {
+    lane_uint state = v * 747796405u + 2891336453u;
+    lane_uint word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+real unit_random(lane_uint v) {
+    return TO_REAL(hash_lanes(v) >> 8) * (1.0f / 16777216.0f);
+}
+
+// Colour seen along one ray: shaded surface, or the background.
+vec3 trace_color(vec3 origin, vec3 dir, march_result m, scalar pixel_angle,
+                 __constant scalar *params) {
+    vec3 background = v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);
+    if (!ANY(m.hit))
+        return background;
+    vec3 p = v3_add(origin, v3_scale(dir, m.t));
+    real threshold = hit_threshold(m.t, pixel_angle);
+    vec3 normal = estimate_normal(p, threshold, params);
+    return v3_select(background, shade(p, normal, dir, threshold, m.hit, params), m.hit);
+}
+
+// Renders one tile. Work-item (gx, gy) covers LANES pixels of one row.
+// `out`: PLANE_COUNT planes of pitch * tile_height floats (R G B A Z N.x N.y
+// N.z steps); pitch is the tile width rounded up to a multiple of LANES.
+__kernel void render(__global float *out, __constant scalar *params,
+                     __constant scalar *camera, int width, int height,
+                     int x0, int y0, int pitch, int tile_height, int samples, uint seed) {
+    int gx = get_global_id(0), gy = get_global_id(1);
+    int column = gx * LANES;
+    real px = (real)(x0 + column) + LANE_INDEX;
+    real py = (real)(y0 + gy);
+    mask inside = (px < (real)width) & (py < (real)height);
+    scalar pixel_angle = 2.0f * camera[CAMERA_TAN_HALF_FOV] / (scalar)height;
+    vec3 origin = v3(camera[CAMERA_POSITION], camera[CAMERA_POSITION + 1], camera[CAMERA_POSITION + 2]);
+
+    // The pinhole ray through the pixel centre gives the AOVs.
+    vec3 dir = pixel_ray(camera, width, height, px + 0.5f, py + 0.5f);
+    march_result centre = march(origin, dir, inside, pixel_angle, params);
+    vec3 normal = v3((real)0.0f, 0.0f, 0.0f);
+    if (ANY(centre.hit)) {
+        vec3 p = v3_add(origin, v3_scale(dir, centre.t));
+        normal = v3_select(normal, estimate_normal(p, hit_threshold(centre.t, pixel_angle), params),
+                           centre.hit);
+    }
+
+    vec3 color;
+    if (samples == 1) {
+        color = trace_color(origin, dir, centre, pixel_angle, params);
+    } else {
+        // Stratified: a grid x grid array of cells over the pixel, samples
+        // of them taken in order, each jittered within its cell.
+        int grid = (int)ceil(sqrt((float)samples));
+        lane_uint pixel_id = TO_UINT(py) * (uint)width + TO_UINT(px);
+        color = v3((real)0.0f, 0.0f, 0.0f);
+        for (int s = 0; s < samples; s++) {
+            lane_uint key = hash_lanes(pixel_id * (uint)samples + (uint)s) ^ seed;
+            real jx = ((real)(s % grid) + unit_random(key)) / (scalar)grid;
+            real jy = ((real)(s / grid) + unit_random(key ^ 0x9e3779b9u)) / (scalar)grid;
+            vec3 sample_dir = pixel_ray(camera, width, height, px + jx, py + jy);
+            march_result m = march(origin, sample_dir, inside, pixel_angle, params);
+            color = v3_add(color, trace_color(origin, sample_dir, m, pixel_angle, params));
+        }
+        color = v3_scale(color, (real)(1.0f / (scalar)samples));
+    }
+
+    __global float *pixel = out + gy * pitch + column;
+    int plane = pitch * tile_height;
+    real depth = SELECT((real)INFINITY, centre.t, centre.hit);
+    STORE_LANES(TO_FLOAT(color.x), 0, pixel + PLANE_R * plane);
+    STORE_LANES(TO_FLOAT(color.y), 0, pixel + PLANE_G * plane);
+    STORE_LANES(TO_FLOAT(color.z), 0, pixel + PLANE_B * plane);
+    STORE_LANES(TO_FLOAT((real)1.0f), 0, pixel + PLANE_A * plane);
+    STORE_LANES(TO_FLOAT(depth), 0, pixel + PLANE_Z * plane);
+    STORE_LANES(TO_FLOAT(normal.x), 0, pixel + PLANE_NX * plane);
+    STORE_LANES(TO_FLOAT(normal.y), 0, pixel + PLANE_NY * plane);
+    STORE_LANES(TO_FLOAT(normal.z), 0, pixel + PLANE_NZ * plane);
+    STORE_LANES(TO_FLOAT(centre.steps), 0, pixel + PLANE_STEPS * plane);
+}
+
+// Distance estimates at points: `points` holds count x's, then count y's,
+// then count z's (count a multiple of LANES); `distances` gets count values.
+__kernel void distance_at_points(__global const scalar *points, __global scalar *distances,
+                       __constant scalar *params, int count) {
+    int i = get_global_id(0);
+    vec3 p = v3(LOAD_LANES(i, points), LOAD_LANES(i, points + count),
+                LOAD_LANES(i, points + 2 * count));
+    STORE_LANES(distance_estimate(p, params), i, distances);
+}

@@ -1,0 +1,35 @@
+// Shadow rays toward a light, marched at most MAX_STEPS steps and no further
+// than `max_t` (the light's distance, or MAX_DISTANCE for a directional
+// light). Rays of lanes that are not `active` are not marched.
+
+// Hard shadow: 0 where the ray hits a surface before the light, else 1.
+real hard_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, mask active,
+                 __constant scalar *params) {
+    real t = 2.0f * threshold;
+    real visible = 1.0f;
+    for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
+        real d = distance_estimate(v3_add(origin, v3_scale(to_light, t)), params);
+        mask blocked = active & (d < threshold);
+        visible = SELECT(visible, (real)0.0f, blocked);
+        t = t + d;
+        active = active & !blocked & (t < max_t);
+    }
+    return visible;
+}
+
+// Soft shadow, after Quilez ("penumbra"): the smallest k * d / t along the
+// ray, so rays that graze an occluder are partly lit; larger k, harder edge.
+real soft_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, real k, mask active,
+                 __constant scalar *params) {
+    real t = 2.0f * threshold;
+    real visible = 1.0f;
+    for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
+        real d = distance_estimate(v3_add(origin, v3_scale(to_light, t)), params);
+        visible = SELECT(visible, min(visible, k * d / t), active);
+        mask blocked = active & (d < threshold);
+        visible = SELECT(visible, (real)0.0f, blocked);
+        t = t + max(d, threshold);
+        active = active & !blocked & (t < max_t);
+    }
+    return clamp(visible, 0.0f, 1.0f);
+}

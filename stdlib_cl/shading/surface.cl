@@ -1,0 +1,21 @@
+// Surface normals and Blinn-Phong lighting. Normals: tetrahedral differences
+// (4 evaluations, Quilez "normals for an SDF"), step tied to the hit
+// threshold so that detail below the pixel footprint is not amplified.
+vec3 estimate_normal(vec3 p, real h, __constant scalar *params) {
+    real a = distance_estimate(v3(p.x + h, p.y - h, p.z - h), params);
+    real b = distance_estimate(v3(p.x - h, p.y - h, p.z + h), params);
+    real c = distance_estimate(v3(p.x - h, p.y + h, p.z - h), params);
+    real d = distance_estimate(v3(p.x + h, p.y + h, p.z + h), params);
+    return v3_normalize(v3(a - b - c + d, -a - b + c + d, -a + b - c + d));
+}
+
+// Blinn-Phong: (albedo * max(n.l, 0) + specular * max(n.h, 0)^shininess)
+// times the light's radiance (colour * intensity * visibility).
+vec3 blinn_phong(vec3 normal, vec3 to_light, vec3 to_eye, vec3 albedo,
+                 real specular, real shininess, vec3 radiance) {
+    real diffuse = max(v3_dot(normal, to_light), 0.0f);
+    vec3 halfway = v3_normalize(v3_add(to_light, to_eye));
+    real highlight = specular * pow(max(v3_dot(normal, halfway), 1e-6f), shininess);
+    highlight = SELECT((real)0.0f, highlight, diffuse > 0.0f);
+    return v3_mul(v3_add(v3_scale(albedo, diffuse), v3(highlight, highlight, highlight)), radiance);
+}
