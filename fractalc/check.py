@@ -156,7 +156,10 @@ class _Checker:
             self.let_values[name] = _ERROR
             return _ERROR
         self.evaluating.append(name)
-        value = self.evaluate(decl.value)
+        try:
+            value = self.value_of(decl.value)
+        except _Failed:
+            value = _ERROR
         self.evaluating.pop()
         self.let_values.setdefault(name, value)
         return self.let_values[name]
@@ -280,7 +283,7 @@ class _Checker:
                     self.fail(arg.span, f"'{signature.name}' has no argument '{name}' (its arguments: {names})")
             if name in bound:
                 self.fail(arg.span, f"argument '{name}' is given twice")
-            bound[name] = (arg, self.value_of(arg.value))
+            bound[name] = (arg, self._evaluate(arg.value))
         for p in params:
             if p.name not in bound and p.default is None:
                 self.fail(e.span, f"'{signature.name}' needs the argument '{p.name}'")
@@ -298,7 +301,9 @@ class _Checker:
             if value.type == WORD and want != "material":
                 self.unknown_name(span, value.data)
             if value.type == WORD:
-                self.fail(span, f"unknown material '{value.data}'")
+                close = difflib.get_close_matches(value.data, list(self.material_decls), n=1)
+                hint = f" (did you mean '{close[0]}'?)" if close else ""
+                self.fail(span, f"unknown material '{value.data}'{hint}")
             self.fail(span, f"'{param.name}' of '{owner}' needs {word}, this is {_TYPE_WORDS[value.type]}")
         data = value.data
         if want == "size" and value.type == NUM:
@@ -343,7 +348,7 @@ class _Checker:
             try:
                 if p.name in bound:
                     arg, value = bound[p.name]
-                    converted[p.name] = self.convert(arg.span, value, p, signature.name)
+                    converted[p.name] = self.convert(arg.value.span, value, p, signature.name)
                 else:
                     converted[p.name] = _default(p)
             except _Failed:
@@ -353,7 +358,7 @@ class _Checker:
         constants = {k: v.value for k, v in converted.items() if isinstance(v, ir.Const)}
         for p in signature.parameters:
             if p.name in bound and any(c.startswith(("<=", ">=")) and c[2:3].isalpha() for c in p.constraints):
-                self.check_constraints(bound[p.name][0].span, converted[p.name], p, signature.name, constants)
+                self.check_constraints(bound[p.name][0].value.span, converted[p.name], p, signature.name, constants)
         return tuple(converted[p.name] for p in signature.parameters)
 
     def call(self, e: ast.Call) -> Value:
@@ -499,18 +504,20 @@ class _Checker:
                         found.get("reflectivity", default.reflectivity))
 
     def camera(self, decl: ast.CameraDecl | None) -> Camera:
+        errors_before = len(self.errors)
         found = self.entries(decl.block if decl else None, CAMERA_KEYS, "camera")
         camera = Camera(**found)
         forward = [t - p for t, p in zip(camera.target, camera.position)]
-        cross = _cross(forward, camera.up)
-        if decl and math.sqrt(sum(c * c for c in cross)) <= 1e-9 * max(1.0, _norm(forward) * _norm(camera.up)):
+        if len(self.errors) > errors_before:
+            return camera
+        if _norm(forward) == 0:
+            where = next((x.value.span for x in decl.block.entries if x.key == "target"), decl.span)
+            self.error(where, "the camera's target is its position: it looks nowhere")
+        elif _norm(_cross(forward, camera.up)) <= 1e-9 * _norm(forward) * _norm(camera.up):
             entry = next((x for x in decl.block.entries if x.key == "up"), None)
-            if _norm(forward) == 0:
-                where = next((x.value.span for x in decl.block.entries if x.key == "target"), decl.span)
-                self.error(where, "the camera's target is its position: it looks nowhere")
-            else:
-                self.error(entry.value.span if entry else decl.span,
-                           "the camera's 'up' is parallel to its view direction (target - position)")
+            if entry is None:   # looking straight along the default up: y is up instead
+                return replace(camera, up=(0.0, 1.0, 0.0))
+            self.error(entry.value.span, "the camera's 'up' is parallel to its view direction (target - position)")
         return camera
 
     def light(self, decl: ast.LightDecl) -> Light | None:

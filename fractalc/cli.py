@@ -1,0 +1,176 @@
+"""The `fractalc` command line (LANGUAGE.md, "Command line").
+
+Exit codes: 0 success; 2 a scene or usage error (`FILE:LINE:COL: error:`
+with the source line and a caret); 1 a runtime failure, in one line;
+130 interrupted. Never a traceback for any of these.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+from .errors import RenderError, SceneError
+
+IMAGE_EXTENSIONS = (".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff")
+
+
+class UsageError(Exception):
+    pass
+
+
+def _parse_set(values: list[str]) -> dict[str, float]:
+    params = {}
+    for item in values or ():
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise UsageError(f"--set takes NAME=VALUE, not '{item}'")
+        try:
+            params[name.strip()] = float(value)
+        except ValueError:
+            raise UsageError(f"--set {name.strip()}: '{value}' is not a number") from None
+    return params
+
+
+def _load(args):
+    from .api import load
+    params = _parse_set(getattr(args, "set", None))
+    return load(args.scene, params=params, precision=getattr(args, "precision", None),
+                device=getattr(args, "device", None))
+
+
+def _write_text_atomically(path: str, text: str) -> None:
+    import tempfile
+    directory = os.path.dirname(os.path.abspath(path))
+    handle, temporary = tempfile.mkstemp(prefix=".fractalc-", suffix=".cl", dir=directory)
+    try:
+        with os.fdopen(handle, "w") as f:
+            f.write(text)
+        os.replace(temporary, path)
+    finally:
+        if os.path.exists(temporary):
+            os.unlink(temporary)
+
+
+def command_render(args) -> int:
+    if not args.output.lower().endswith(IMAGE_EXTENSIONS):
+        raise UsageError(f"-o {args.output}: the output must end in one of {', '.join(IMAGE_EXTENSIONS)}")
+    scene = _load(args)
+    overrides = {"width": args.width, "height": args.height, "samples": args.samples}
+    try:
+        start = time.perf_counter()
+        image = scene.render(seed=args.seed, progress=not args.quiet, **overrides)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    image.save(args.output)
+    if not args.quiet:
+        height, width = image.depth.shape
+        print(f"wrote {args.output} ({width}x{height}, {time.perf_counter() - start:.2f} s)",
+              file=sys.stderr)
+    return 0
+
+
+def command_compile(args) -> int:
+    scene = _load(args)
+    _write_text_atomically(args.output, scene.kernel_source(lanes=args.lanes))
+    return 0
+
+
+def command_check(args) -> int:
+    from .check import check
+    from .parse import parse
+    try:
+        with open(args.scene, "rb") as f:
+            text = f.read(8 * 1024 * 1024 + 1).decode("utf-8", errors="replace")
+    except OSError as error:
+        raise RenderError(f"cannot read {args.scene}: {error.strerror}") from None
+    check(parse(text, args.scene))
+    return 0
+
+
+def command_devices(args) -> int:
+    from .build import list_devices
+    devices = list_devices()
+    if not devices:
+        from .build import INSTALL_HINT
+        raise RenderError(INSTALL_HINT)
+    for d in devices:
+        print(f"{d.index}: {d.name} [{d.kind}] on {d.platform}; {d.version}; "
+              f"{d.compute_units} compute units; double: {'yes' if d.double else 'no'}")
+    return 0
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="fractalc", description="Compile and render .frac fractal scenes.")
+    from . import __version__
+    parser.add_argument("--version", action="version", version=f"fractalc {__version__}")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def device_options(p):
+        p.add_argument("--set", action="append", metavar="NAME=VALUE",
+                       help="set a param (repeatable); no recompilation")
+        p.add_argument("--precision", choices=("float", "double"),
+                       help="arithmetic of the whole kernel (default: the file's, else float)")
+        p.add_argument("--device", help="OpenCL device: index or name substring (see 'fractalc devices'; "
+                                        "also $FRACTALC_DEVICE)")
+
+    render = commands.add_parser("render", help="render a scene to EXR or PNG",
+                                 description="Render a scene. EXR: linear float with Z, normals and "
+                                             "steps; PNG: sRGB 8-bit.")
+    render.add_argument("scene")
+    render.add_argument("-o", "--output", required=True, help="output image (.exr, .png, ...)")
+    render.add_argument("--width", type=int)
+    render.add_argument("--height", type=int)
+    render.add_argument("--samples", type=int, help="anti-aliasing samples per pixel")
+    render.add_argument("--seed", type=int, default=0, help="jitter seed for samples > 1")
+    render.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    device_options(render)
+    render.set_defaults(run=command_render)
+
+    compile_ = commands.add_parser("compile", help="write the standalone OpenCL kernel",
+                                   description="Write the scene's kernel as one standalone .cl file "
+                                               "(no includes; the kernel signature is documented at its top).")
+    compile_.add_argument("scene")
+    compile_.add_argument("-o", "--output", required=True, help="output .cl file")
+    compile_.add_argument("--lanes", type=int, choices=(1, 2, 4, 8, 16),
+                          help="rays per work-item (default: 8 on CPUs, 1 on GPUs)")
+    device_options(compile_)
+    compile_.set_defaults(run=command_compile)
+
+    check_ = commands.add_parser("check", help="parse and type-check a scene",
+                                 description="Parse and check a scene; print every error.")
+    check_.add_argument("scene")
+    check_.set_defaults(run=command_check)
+
+    devices = commands.add_parser("devices", help="list OpenCL devices")
+    devices.set_defaults(run=command_devices)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = _parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.run(args)
+    except SceneError as error:
+        print(error, file=sys.stderr)
+        return 2
+    except UsageError as error:
+        parser.print_usage(sys.stderr)
+        print(f"fractalc: error: {error}", file=sys.stderr)
+        return 2
+    except RenderError as error:
+        print(f"fractalc: error: {error}", file=sys.stderr)
+        return 1
+    except OSError as error:
+        print(f"fractalc: error: {error.strerror or error}: {error.filename or ''}".rstrip(": "),
+              file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("fractalc: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
