@@ -1,0 +1,1 @@
+# The Lark grammar of the .frac language, shipped as package data (fractalc.grammar).
