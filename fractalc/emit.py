@@ -81,16 +81,31 @@ class _FunctionWriter:
             return not isinstance(node.vector, (ir.Var, ir.Call))
         return isinstance(node, ir.Call) or self.uses.get(node, 0) > 1
 
-    def argument(self, node) -> str:
-        """A value passed to a function: uniform scalars widened to `real`."""
+    def argument(self, node, c_type: str = "real") -> str:
+        """A value passed to a function: uniform scalars widened to `real`
+        (or converted to the parameter's C type)."""
         text = self.text[node]
         if isinstance(node, ir.Vec):
             return text
+        if c_type == "int":
+            return f"(int){text}"
         if node not in self.varying and node.type == ir.REAL:
             return f"(real){text}"
         if node not in self.varying and node.type == ir.INT:
             return f"(lane_int){text}"
         return text
+
+    def call_arguments(self, node: ir.Call) -> list[str]:
+        """A library call's arguments: vec3s as `v3`, other vectors spread
+        into their components, each converted to its parameter's C type."""
+        flat = []
+        for arg in node.args:
+            if isinstance(arg, ir.Vec) and len(arg) != 3:
+                flat.extend(arg.items)
+            else:
+                flat.append(arg)
+        types = library().functions[node.function].parameter_types
+        return [self.argument(a, t) for a, t in zip(flat, types)]
 
     def expression(self, node) -> str:
         if isinstance(node, ir.Const):
@@ -108,7 +123,7 @@ class _FunctionWriter:
                 return self.text[items[0].vector]
             return f"v3({', '.join(self.argument(c) for c in items)})"
         if isinstance(node, ir.Call):
-            return f"{node.function}({', '.join(self.argument(a) for a in node.args)})"
+            return f"{node.function}({', '.join(self.call_arguments(node))})"
         if node.op in _C_OPS:
             args = [self.argument(a) if node.op in ("select", "min", "max", "abs") else self.text[a]
                     for a in node.args]

@@ -48,6 +48,7 @@ class Function:
     header: str                    # the file's leading comment, emitted once
     file: str
     calls: tuple[str, ...]         # library functions it calls
+    parameter_types: tuple[str, ...] = ()   # C types of its parameters
 
 
 _ANNOTATION = re.compile(r"^//:\s*(\w+)\s+(\w+)\((.*)\)\s*$")
@@ -83,6 +84,13 @@ def _parse_parameter(text: str) -> Parameter:
     type_, default, constraints = match.groups()
     return Parameter(name, type_, _parse_value(default) if default else None,
                      tuple(constraints.split()))
+
+
+def _parameter_types(source: str) -> tuple[str, ...]:
+    """C types of a definition's parameters (`real`, `int`, `vec3`, ...)."""
+    code = "\n".join(line for line in source.splitlines() if not line.startswith("//"))
+    inside = code[code.index("(") + 1:code.index(")")]
+    return tuple(" ".join(p.split()[:-1]).replace("__constant ", "") for p in inside.split(",") if p.strip())
 
 
 def _parse_file(path, file_name: str) -> tuple[list[Function], dict[str, Signature]]:
@@ -121,7 +129,8 @@ def _parse_file(path, file_name: str) -> tuple[list[Function], dict[str, Signatu
                     kind, lang_name, args = annotation.groups()
                     params = tuple(_parse_parameter(a) for a in _split_top_level(args))
                     signatures[lang_name] = Signature(kind, lang_name, params, name)
-            functions.append(Function(name, source, "\n".join(header), file_name, ()))
+            functions.append(Function(name, source, "\n".join(header), file_name, (),
+                                      _parameter_types(source)))
             name = None
     return functions, signatures
 
@@ -166,7 +175,8 @@ def library() -> Library:
     for f in functions.values():
         body = re.sub(r"//[^\n]*", "", f.source)
         called = {m for m in _IDENTIFIER.findall(body) if m in names and m != f.name}
-        with_calls[f.name] = Function(f.name, f.source, f.header, f.file, tuple(sorted(called)))
+        with_calls[f.name] = Function(f.name, f.source, f.header, f.file, tuple(sorted(called)),
+                                      f.parameter_types)
     return Library(with_calls, signatures, (root / PRELUDE).read_text(), (root / TEMPLATE).read_text())
 
 
