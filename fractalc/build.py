@@ -97,7 +97,7 @@ class Device:
     @property
     def lanes(self) -> int:
         """Rays per work-item: vector lanes on CPUs, one ray per item on GPUs."""
-        return 1 if self.info.kind == "GPU" else 8
+        return 1 if self.info.kind == "GPU" else 16
 
 
 @lru_cache(maxsize=None)

@@ -75,7 +75,7 @@ class _FunctionWriter:
         self.counts: dict[str, int] = {}
 
     def named(self, node) -> bool:
-        if isinstance(node, (ir.Const, ir.Param, ir.Var, ir.Vec)):
+        if isinstance(node, (ir.Const, ir.Param, ir.Var, ir.Vec, ir.Bounded)):
             return False
         if isinstance(node, ir.Comp):
             return not isinstance(node.vector, (ir.Var, ir.Call))
@@ -130,16 +130,41 @@ class _FunctionWriter:
             return _C_OPS[node.op](*args)
         return f"{node.op}({', '.join(self.argument(a) for a in node.args)})"
 
-    def write(self, signature: str) -> str:
-        for node in self.nodes:
+    def block(self, root, indent: str) -> None:
+        """Emit the statements computing `root`; a `Bounded` node's inner
+        expression goes in its own `if` block, run only when a lane needs it."""
+        outer = lambda n: (n.bound, n.margin) if isinstance(n, ir.Bounded) else ir.children(n)  # noqa: E731
+        for node in ir.walk(root, outer):
+            if node in self.text:
+                continue
+            if isinstance(node, ir.Bounded):
+                self.bounded(node, indent)
+                continue
             text = self.expression(node)
             if self.named(node) and node is not self.root:
-                prefix = _TEMP_PREFIX[node.type]
-                name = f"{prefix}{self.counts.get(prefix, 0)}"
-                self.counts[prefix] = self.counts.get(prefix, 0) + 1
-                self.lines.append(f"    {_C_TYPES[node.type]} {name} = {text};")
-                text = name
+                text = self.declare(node.type, text, indent)
             self.text[node] = text
+
+    def declare(self, type_: str, text: str, indent: str) -> str:
+        prefix = _TEMP_PREFIX[type_]
+        name = f"{prefix}{self.counts.get(prefix, 0)}"
+        self.counts[prefix] = self.counts.get(prefix, 0) + 1
+        self.lines.append(f"{indent}{_C_TYPES[type_]} {name} = {text};")
+        return name
+
+    def bounded(self, node: ir.Bounded, indent: str) -> None:
+        name = self.declare(ir.REAL, self.argument(node.bound), indent)
+        near = f"({name} < {self.text[node.margin]})"
+        self.lines.append(f"{indent}if (ANY{near}) {{   // near the bound: evaluate what it bounds")
+        outside = dict(self.text)
+        self.block(node.inner, indent + "    ")
+        self.lines.append(f"{indent}    {name} = SELECT({name}, {self.argument(node.inner)}, {near});")
+        self.lines.append(f"{indent}}}")
+        self.text = outside   # temporaries of the block are out of scope
+        self.text[node] = name
+
+    def write(self, signature: str) -> str:
+        self.block(self.root, "    ")
         body = "\n".join(self.lines)
         result = self.argument(self.root)
         return f"{signature} {{\n{body}{chr(10) if body else ''}    return {result};\n}}"

@@ -73,7 +73,18 @@ class Vec:
         return len(self.items)
 
 
-Expr = Union[Const, Param, Var, Op, Call, Comp]
+@dataclass(frozen=True)
+class Bounded:
+    """`inner` where `bound < margin`, else `bound`: a conservative bounding
+    distance that spares evaluating `inner` (a fractal) far from it. Both
+    are lower bounds of the true distance, so either is a safe step."""
+    bound: "Expr"
+    inner: "Expr"
+    margin: "Expr"
+    type: str = REAL
+
+
+Expr = Union[Const, Param, Var, Op, Call, Comp, Bounded]
 Arg = Union[Expr, Vec]
 
 
@@ -181,6 +192,8 @@ def vec(*items: Expr) -> Vec:
 def children(e) -> tuple:
     if isinstance(e, (Op, Call)):
         return e.args
+    if isinstance(e, Bounded):
+        return (e.bound, e.inner, e.margin)
     if isinstance(e, Comp):
         return (e.vector,)
     if isinstance(e, Vec):
@@ -188,8 +201,9 @@ def children(e) -> tuple:
     return ()
 
 
-def walk(root):
-    """Every distinct node reachable from `root`, children before parents."""
+def walk(root, children=children):
+    """Every distinct node reachable from `root` (through `children`),
+    children before parents."""
     seen: set = set()
     order: list = []
     stack = [(root, False)]

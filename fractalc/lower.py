@@ -12,10 +12,12 @@ import math
 from dataclasses import dataclass
 
 from . import ir
+from .stdlib import library
 from .program import (DEFAULT_MATERIAL, CheckedScene, Combination, Material, Primitive, Shape,
                       Transformed, WithMaterial)
 
 POINT = ir.Var("p", ir.VEC3)
+BOUND_MARGIN = 0.1      # evaluate a fractal within 10% of its bound radius of the bound
 
 Point = tuple[ir.Expr, ir.Expr, ir.Expr]
 
@@ -68,17 +70,28 @@ def _repeated(point: Point, period: ir.Vec) -> Point:
 class _Lowerer:
     def __init__(self, scene: CheckedScene):
         self.ids = _material_ids(scene)
+        self.library = library()
 
     def shape(self, s: Shape, point: Point, material: int) -> tuple[ir.Expr, ir.Expr]:
         """(distance, material id) of shape `s` at `point`."""
         if isinstance(s, Primitive):
-            args = (ir.Vec(point),) + s.args
-            return ir.call(s.signature.function, args), ir.Const(float(material), ir.INT)
+            return self.primitive(s, point), ir.Const(float(material), ir.INT)
         if isinstance(s, WithMaterial):
             return self.shape(s.shape, point, self.ids[s.material])
         if isinstance(s, Combination):
             return self.combination(s, point, material)
         return self.transformed(s, point, material)
+
+    def primitive(self, s: Primitive, point: Point) -> ir.Expr:
+        distance = ir.call(s.signature.function, (ir.Vec(point),) + s.args)
+        bound_radius = f"{s.signature.name}_bound_radius"
+        if bound_radius not in self.library.functions:
+            return distance
+        # A fractal: far from its bounding sphere, the sphere's distance is
+        # a safe step and the fractal is not evaluated (Hart et al. 1989).
+        radius = ir.call(bound_radius, s.args)
+        bound = ir.call("sd_sphere", (ir.Vec(point), radius))
+        return ir.Bounded(bound, distance, ir.mul(radius, ir.const(BOUND_MARGIN)))
 
     def combination(self, s: Combination, point: Point, material: int):
         lowered = [self.shape(child, point, material) for child in s.shapes]
