@@ -13,15 +13,15 @@ from dataclasses import dataclass, replace
 
 from . import ast, ir
 from .errors import Diagnostic, SceneError, Span, diagnostic
-from .program import (DEFAULT_MATERIAL, Camera, CheckedScene, Combination, Light, Material,
-                      ParamInfo, Primitive, RenderSettings, Transformed, WithMaterial)
+from .program import (DEFAULT_MATERIAL, Camera, CheckedScene, Combination, Fog, Glow, Light,
+                      Material, ParamInfo, Primitive, RenderSettings, Slice, Transformed,
+                      WithMaterial)
 from .stdlib import COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
 
 # The language's value types.
 NUM, SHAPE, MATERIAL, WORD = "number", "shape", "material", "word"
 NOT_YET = {
     "fractal": {"mandelbulb", "julia", "mandelbox", "menger", "sierpinski"},
-    "render": {"glow", "fog"},
     "camera": {"aperture", "focus"},
 }
 
@@ -466,8 +466,15 @@ class _Checker:
                 hint = f" (did you mean '{close[0]}'?)" if close else f" (known: {', '.join(keys)})"
                 self.error(entry.key_span, f"'{owner}' has no key '{entry.key}'{hint}")
                 continue
-            if isinstance(entry.value, ast.Block):
-                self.error(entry.value.span, f"'{entry.key}' takes a value, not a block")
+            nested = BLOCK_KEYS.get(param.type)
+            if isinstance(entry.value, ast.Block) != bool(nested):
+                self.error(entry.value.span, f"'{entry.key}' takes a block {{ ... }}" if nested
+                           else f"'{entry.key}' takes a value, not a block")
+                continue
+            if nested:
+                keys_type, defaults = nested
+                values = self.entries(entry.value, keys_type, entry.key)
+                found[entry.key] = replace(defaults, **values)
                 continue
             try:
                 found[entry.key] = self.entry_value(entry, param, owner)
@@ -597,12 +604,20 @@ _LIGHT_COMMON = (_P("color", "vec3", None, ">=0"), _P("intensity", "num", None, 
                  _P("shadows", "word:none|hard|soft"), _P("softness", "num", None, ">0"))
 LIGHT_KEYS = {"directional": _keys(_P("direction", "vec3", None, "nonzero"), *_LIGHT_COMMON),
               "point": _keys(_P("position", "vec3"), *_LIGHT_COMMON)}
+BLOCK_KEYS = {
+    "block:glow": (_keys(_P("color", "vec3", None, ">=0"), _P("strength", "num", None, ">=0"),
+                         _P("radius", "num", None, ">0")), Glow()),
+    "block:fog": (_keys(_P("color", "vec3", None, ">=0"), _P("density", "num", None, ">=0")), Fog()),
+    "block:slice": (_keys(_P("normal", "vec3", None, "nonzero"), _P("offset", "num")), Slice()),
+}
 RENDER_KEYS = _keys(
     _P("width", "int", None, ">=1", "<=65536"), _P("height", "int", None, ">=1", "<=65536"),
     _P("max_steps", "int", None, "1..100000"), _P("max_distance", "num", None, ">0"),
     _P("epsilon", "word:pixel|num", None, ">0"), _P("ao", "num", None, "0..1"),
     _P("samples", "int", None, ">=1", "<=4096"), _P("background", "vec3", None, ">=0"),
-    _P("precision", "word:float|double"), _P("reflections", "int", None, "0..16"))
+    _P("precision", "word:float|double"), _P("reflections", "int", None, "0..16"),
+    _P("glow", "block:glow"), _P("fog", "block:fog"), _P("slice", "block:slice"),
+    _P("ao_method", "word:normal|steps"), _P("dither", "num", None, "0..1"))
 
 
 def check(program: ast.Program) -> CheckedScene:

@@ -238,16 +238,19 @@ def _shade_function(scene_ir: SceneIR) -> tuple[str, list[str]]:
     scene = scene_ir.scene
     ao = scene.render.ao > 0
     needs = {"blinn_phong"}
-    lines = ["vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, mask hit, __constant scalar *params) {",
+    lines = ["vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, real steps, mask hit,",
+             "           __constant scalar *params) {",
              "    surface s = surface_of(material_id(p, params), params);",
              "    vec3 to_eye = v3(-dir.x, -dir.y, -dir.z);"]
-    if ao:
+    if ao and scene.render.ao_method == "steps":
+        needs.add("step_occlusion")
+        lines.append(f"    real occlusion = step_occlusion(steps, {literal(scene.render.ao)});")
+    elif ao:
         needs.add("ambient_occlusion")
         lines.append(f"    real occlusion = ambient_occlusion(p, normal, {literal(AO_DELTA)}, "
                      f"{literal(scene.render.ao)}, params);")
-        lines.append(f"    vec3 color = v3_scale(s.albedo, {literal(AMBIENT)} * occlusion);")
-    else:
-        lines.append(f"    vec3 color = v3_scale(s.albedo, {literal(AMBIENT)});")
+    ambient = f"{literal(AMBIENT)} * occlusion" if ao else literal(AMBIENT)
+    lines.append(f"    vec3 color = v3_scale(s.albedo, {ambient});")
     if any(light.shadows != "none" for light in scene.lights):
         lines.append("    vec3 lifted = v3_add(p, v3_scale(normal, 2.0f * threshold));")
     if not scene.lights:
@@ -260,6 +263,56 @@ def _shade_function(scene_ir: SceneIR) -> tuple[str, list[str]]:
         needs |= light_needs
     lines += ["    return color;", "}"]
     return "\n".join(lines), sorted(needs)
+
+
+def features(render) -> dict[str, bool]:
+    """The template's optional effects, on where the scene uses them."""
+    return {
+        "GLOW": render.glow is not None and render.glow.strength > 0,
+        "FOG": render.fog is not None and render.fog.density > 0,
+        "DITHER": render.dither > 0,
+    }
+
+
+def _effect_constants(render) -> list[str]:
+    on = features(render)
+    lines = []
+    if on["GLOW"]:
+        glow = render.glow
+        lines += [*(f"#define GLOW_{c} {literal(v)}" for c, v in zip("RGB", glow.color)),
+                  f"#define GLOW_STRENGTH {literal(glow.strength)}", f"#define GLOW_RADIUS {literal(glow.radius)}"]
+    if on["FOG"]:
+        lines += [*(f"#define FOG_{c} {literal(v)}" for c, v in zip("RGB", render.fog.color)),
+                  f"#define FOG_DENSITY {literal(render.fog.density)}"]
+    if on["DITHER"]:
+        lines.append(f"#define DITHER {literal(render.dither)}")
+    return lines
+
+
+_FEATURE_IF = re.compile(r"^#if FEATURE_(\w+)\s*$")
+
+
+def resolve_features(text: str, enabled: dict[str, bool]) -> str:
+    """Keep the `#if FEATURE_X` blocks of enabled features (without their
+    directives) and drop the others; other preprocessor lines stay."""
+    out, stack = [], []      # stack: None for a foreign #if, else whether kept
+    for line in text.splitlines():
+        match = _FEATURE_IF.match(line)
+        keeping = all(k for k in stack if k is not None)
+        if match:
+            stack.append(enabled[match.group(1)])
+            continue
+        if line.startswith("#if"):
+            stack.append(None)
+        elif line.startswith("#else") and stack and stack[-1] is not None:
+            stack[-1] = not stack[-1]
+            continue
+        elif line.startswith("#endif") and stack:
+            if stack.pop() is not None:
+                continue
+        if keeping:
+            out.append(line)
+    return "\n".join(out)
 
 
 def _constants(scene_ir: SceneIR, target: Target) -> str:
@@ -277,6 +330,7 @@ def _constants(scene_ir: SceneIR, target: Target) -> str:
         f"#define HIT_EPSILON {literal(0.0 if pixel else render.epsilon)}",
         *(f"#define BACKGROUND_{c} {literal(v)}" for c, v in zip("RGB", render.background)),
         f"#define LANE_INDEX {lane_index}",
+        *_effect_constants(render),
     ])
 
 
@@ -329,7 +383,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         distance, material, _surface_function(scene_ir),
         _library_text(shading_functions),
         shade,
-        lib.template,
+        resolve_features(lib.template, features(scene.render)),
     ]
     source = "\n\n".join(p.strip("\n") for p in parts if p) + "\n"
     if target.double:

@@ -135,6 +135,15 @@ class _Lowerer:
 def lower(scene: CheckedScene) -> SceneIR:
     """Lower the scene's shape to distance and material-id expressions."""
     lowerer = _Lowerer(scene)
-    distance, material_id = lowerer.shape(scene.shape, ir.components(POINT),
-                                          lowerer.ids[DEFAULT_MATERIAL])
+    point = ir.components(POINT)
+    distance, material_id = lowerer.shape(scene.shape, point, lowerer.ids[DEFAULT_MATERIAL])
+    cut = scene.render.slice
+    if cut is not None:
+        # Slicing (seed 002): intersect with the half-space behind the plane;
+        # the cut face is part of the plane, so its normal is the plane's.
+        length = math.sqrt(sum(c * c for c in cut.normal))
+        plane = ir.const(-cut.offset)
+        for p, c in zip(point, cut.normal):
+            plane = ir.add(plane, ir.mul(p, ir.const(c / length)))
+        distance = ir.op("max", distance, plane)
     return SceneIR(scene, distance, material_id, tuple(scene.materials.values()))

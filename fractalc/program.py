@@ -95,6 +95,28 @@ class Light:
 
 
 @dataclass(frozen=True)
+class Glow:
+    """Light around the surface for rays that miss: strength * exp(-closest / radius)."""
+    color: Vector3 = (1.0, 0.8, 0.5)
+    strength: float = 1.0
+    radius: float = 0.1
+
+
+@dataclass(frozen=True)
+class Fog:
+    """Exponential distance fog: colour mixes toward `color` by 1 - exp(-density t)."""
+    color: Vector3 = (0.5, 0.6, 0.7)
+    density: float = 0.1
+
+
+@dataclass(frozen=True)
+class Slice:
+    """Cuts away the part of the scene where dot(p, normalize(normal)) > offset."""
+    normal: Vector3 = (0.0, -1.0, 0.0)
+    offset: float = 0.0
+
+
+@dataclass(frozen=True)
 class RenderSettings:
     width: int = 640
     height: int = 480
@@ -106,6 +128,11 @@ class RenderSettings:
     background: Vector3 = (0.05, 0.05, 0.08)
     precision: str = "float"
     reflections: int = 0
+    glow: Glow | None = None
+    fog: Fog | None = None
+    slice: Slice | None = None
+    ao_method: str = "normal"        # normal: sample along the normal; steps: from the step count
+    dither: float = 1.0              # random fraction of the first step, against banding
 
 
 @dataclass(frozen=True)

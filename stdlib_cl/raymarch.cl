@@ -1,8 +1,12 @@
 // The fixed ray-marching template (sphere tracing, Hart 1996).
 // The generated code above this file defines:
 //   real distance_estimate(vec3 p, __constant scalar *params);
-//   vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, mask hit, __constant scalar *params);
-//   MAX_STEPS, MAX_DISTANCE, HIT_EPSILON (0 = pixel footprint), BACKGROUND, LANE_INDEX.
+//   vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, real steps, mask hit,
+//              __constant scalar *params);
+//   MAX_STEPS, MAX_DISTANCE, HIT_EPSILON (0 = pixel footprint), BACKGROUND, LANE_INDEX,
+//   and the constants of the effects the scene uses.
+// `#if FEATURE_...` blocks are resolved by the emitter: a scene's kernel holds
+// only the effects it uses (the directives themselves are gone from it).
 
 // Camera block (`camera` kernel argument), see LANGUAGE.md "Camera model".
 #define CAMERA_POSITION 0
@@ -38,20 +42,38 @@ typedef struct {
     real t;        // ray distance of the hit
     mask hit;
     real steps;    // distance evaluations taken
+#if FEATURE_GLOW
+    real closest;  // the smallest distance estimate along the ray
+#endif
 } march_result;
 
 // Sphere tracing of LANES rays at once; a lane stops on a hit (distance
 // below the threshold, or <= 0 at the start: a camera inside a solid hits at
-// t = 0), past MAX_DISTANCE, or after MAX_STEPS.
-march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle,
+// t = 0), past MAX_DISTANCE, or after MAX_STEPS. `jitter` in [0, 1) shortens
+// the first step by that fraction (dithering against banding, Syntopia part
+// II: steps and glow then vary smoothly between neighbouring pixels).
+march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real jitter,
                    __constant scalar *params) {
-    march_result r = { (real)0.0f, (mask)0, (real)0.0f };
+    march_result r;
+    r.t = 0.0f;
+    r.hit = (mask)0;
+    r.steps = 0.0f;
+#if FEATURE_GLOW
+    r.closest = (real)MAX_DISTANCE;
+#endif
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
         real d = distance_estimate(v3_add(origin, v3_scale(dir, r.t)), params);
         r.steps = r.steps + SELECT((real)0.0f, (real)1.0f, active);
+#if FEATURE_GLOW
+        r.closest = SELECT(r.closest, min(r.closest, d), active);
+#endif
         mask close = (d < hit_threshold(r.t, pixel_angle)) | (d <= 0.0f);
         r.hit = r.hit | (active & close);
         active = active & !close;
+#if FEATURE_DITHER
+        if (i == 0)
+            d = d * (1.0f - jitter);
+#endif
         r.t = SELECT(r.t, r.t + d, active);
         active = active & (r.t < (real)MAX_DISTANCE);
     }
@@ -84,16 +106,37 @@ real unit_random(lane_uint v) {
     return TO_REAL(hash_lanes(v) >> 8) * (1.0f / 16777216.0f);
 }
 
-// Colour seen along one ray: shaded surface, or the background.
-vec3 trace_color(vec3 origin, vec3 dir, march_result m, scalar pixel_angle,
+// The surface normal where a march hit (0 elsewhere).
+vec3 hit_normal(vec3 origin, vec3 dir, march_result m, scalar pixel_angle, __constant scalar *params) {
+    vec3 normal = v3((real)0.0f, 0.0f, 0.0f);
+    if (ANY(m.hit)) {
+        vec3 p = v3_add(origin, v3_scale(dir, m.t));
+        normal = v3_select(normal, estimate_normal(p, hit_threshold(m.t, pixel_angle), params), m.hit);
+    }
+    return normal;
+}
+
+// Colour seen along one ray: the shaded surface or the background, then
+// glow and fog.
+vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel_angle,
                  __constant scalar *params) {
-    vec3 background = v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);
-    if (!ANY(m.hit))
-        return background;
-    vec3 p = v3_add(origin, v3_scale(dir, m.t));
-    real threshold = hit_threshold(m.t, pixel_angle);
-    vec3 normal = estimate_normal(p, threshold, params);
-    return v3_select(background, shade(p, normal, dir, threshold, m.hit, params), m.hit);
+    vec3 color = v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);
+    if (ANY(m.hit)) {
+        vec3 p = v3_add(origin, v3_scale(dir, m.t));
+        real threshold = hit_threshold(m.t, pixel_angle);
+        color = v3_select(color, shade(p, normal, dir, threshold, m.steps, m.hit, params), m.hit);
+    }
+#if FEATURE_GLOW
+    // Glow: misses are lit by how close they passed to the surface.
+    real glow = SELECT((real)0.0f, GLOW_STRENGTH * exp(-max(m.closest, 0.0f) / GLOW_RADIUS), m.hit == (mask)0);
+    color = v3_add(color, v3_scale(v3(GLOW_R, GLOW_G, GLOW_B), glow));
+#endif
+#if FEATURE_FOG
+    // Exponential fog: a miss is infinitely far and shows the fog colour.
+    real clear = SELECT((real)0.0f, exp(-FOG_DENSITY * m.t), m.hit);
+    color = v3_add(v3_scale(color, clear), v3_scale(v3(FOG_R, FOG_G, FOG_B), 1.0f - clear));
+#endif
+    return color;
 }
 
 // Renders one tile. Work-item (gx, gy) covers LANES pixels of one row.
@@ -110,32 +153,33 @@ __kernel void render(__global float *out, __constant scalar *params,
     scalar pixel_angle = 2.0f * camera[CAMERA_TAN_HALF_FOV] / (scalar)height;
     vec3 origin = v3(camera[CAMERA_POSITION], camera[CAMERA_POSITION + 1], camera[CAMERA_POSITION + 2]);
 
+    lane_uint pixel_id = TO_UINT(py) * (uint)width + TO_UINT(px);
+    real jitter = 0.0f;
+#if FEATURE_DITHER
+    jitter = DITHER * unit_random(hash_lanes(pixel_id) ^ seed);
+#endif
+
     // The pinhole ray through the pixel centre gives the AOVs.
     vec3 dir = pixel_ray(camera, width, height, px + 0.5f, py + 0.5f);
-    march_result centre = march(origin, dir, inside, pixel_angle, params);
-    vec3 normal = v3((real)0.0f, 0.0f, 0.0f);
-    if (ANY(centre.hit)) {
-        vec3 p = v3_add(origin, v3_scale(dir, centre.t));
-        normal = v3_select(normal, estimate_normal(p, hit_threshold(centre.t, pixel_angle), params),
-                           centre.hit);
-    }
+    march_result centre = march(origin, dir, inside, pixel_angle, jitter, params);
+    vec3 normal = hit_normal(origin, dir, centre, pixel_angle, params);
 
     vec3 color;
     if (samples == 1) {
-        color = trace_color(origin, dir, centre, pixel_angle, params);
+        color = trace_color(origin, dir, centre, normal, pixel_angle, params);
     } else {
         // Stratified: a grid x grid array of cells over the pixel, samples
         // of them taken in order, each jittered within its cell.
         int grid = (int)ceil(sqrt((float)samples));
-        lane_uint pixel_id = TO_UINT(py) * (uint)width + TO_UINT(px);
         color = v3((real)0.0f, 0.0f, 0.0f);
         for (int s = 0; s < samples; s++) {
             lane_uint key = hash_lanes(pixel_id * (uint)samples + (uint)s) ^ seed;
             real jx = ((real)(s % grid) + unit_random(key)) / (scalar)grid;
             real jy = ((real)(s / grid) + unit_random(key ^ 0x9e3779b9u)) / (scalar)grid;
             vec3 sample_dir = pixel_ray(camera, width, height, px + jx, py + jy);
-            march_result m = march(origin, sample_dir, inside, pixel_angle, params);
-            color = v3_add(color, trace_color(origin, sample_dir, m, pixel_angle, params));
+            march_result m = march(origin, sample_dir, inside, pixel_angle, jitter, params);
+            vec3 sample_normal = hit_normal(origin, sample_dir, m, pixel_angle, params);
+            color = v3_add(color, trace_color(origin, sample_dir, m, sample_normal, pixel_angle, params));
         }
         color = v3_scale(color, (real)(1.0f / (scalar)samples));
     }

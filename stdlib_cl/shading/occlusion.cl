@@ -13,3 +13,9 @@ real ambient_occlusion(vec3 p, vec3 normal, real delta, real strength, __constan
     }
     return clamp(1.0f - strength * occlusion, 0.0f, 1.0f);
 }
+
+// The cheap ambient occlusion of Syntopia part II: rays that needed many
+// steps passed close to much geometry. 1 at no steps, falling with the count.
+real step_occlusion(real steps, real strength) {
+    return clamp(1.0f - strength * steps / (steps + 32.0f), 0.0f, 1.0f);
+}
