@@ -22,7 +22,6 @@ from .stdlib import COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
 NUM, SHAPE, MATERIAL, WORD = "number", "shape", "material", "word"
 NOT_YET = {
     "fractal": {"mandelbulb", "julia", "mandelbox", "menger", "sierpinski"},
-    "camera": {"aperture", "focus"},
 }
 
 
@@ -543,10 +542,6 @@ class _Checker:
 
     def render(self, decl: ast.RenderDecl | None) -> RenderSettings:
         found = self.entries(decl.block if decl else None, RENDER_KEYS, "render")
-        if found.get("reflections", 0) > 0:
-            entry = next(x for x in decl.block.entries if x.key == "reflections")
-            self.error(entry.value.span, "'reflections' above 0 is not supported yet")
-            found.pop("reflections")
         return RenderSettings(**found)
 
 
@@ -599,7 +594,8 @@ def _P(name: str, type_: str, default=None, *constraints: str) -> Parameter:
 MATERIAL_KEYS = _keys(_P("color", "vec3", None, "0..1000"), _P("specular", "num", None, "0..1"),
                       _P("shininess", "num", None, ">0"), _P("reflectivity", "num", None, "0..1"))
 CAMERA_KEYS = _keys(_P("position", "vec3"), _P("target", "vec3"), _P("up", "vec3", None, "nonzero"),
-                    _P("fov", "num", None, ">0", "<180"))
+                    _P("fov", "num", None, ">0", "<180"), _P("aperture", "num", None, ">=0"),
+                    _P("focus", "num", None, ">0"))
 _LIGHT_COMMON = (_P("color", "vec3", None, ">=0"), _P("intensity", "num", None, ">=0"),
                  _P("shadows", "word:none|hard|soft"), _P("softness", "num", None, ">0"))
 LIGHT_KEYS = {"directional": _keys(_P("direction", "vec3", None, "nonzero"), *_LIGHT_COMMON),

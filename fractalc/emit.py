@@ -180,21 +180,27 @@ def _vector(v) -> str:
 
 def _surface_function(scene_ir: SceneIR) -> str:
     """Material properties by id, chosen per lane with selects."""
-    lines = ["typedef struct { vec3 albedo; real specular, shininess; } surface;", "",
+    lines = ["typedef struct { vec3 albedo; real specular, shininess, reflectivity; } surface;", "",
              "surface surface_of(lane_int id, __constant scalar *params) {"]
     for index, material in enumerate(scene_ir.materials):
         albedo = f"v3({', '.join(_uniform(x) for x in material.color.items)})"
         specular, shininess = _uniform(material.specular), _uniform(material.shininess)
+        reflectivity = _uniform(material.reflectivity)
         if index == 0:
-            lines.append(f"    surface s = {{ {albedo}, {specular}, {shininess} }};  // {material.name}")
+            lines.append(f"    surface s = {{ {albedo}, {specular}, {shininess}, {reflectivity} }};"
+                         f"  // {material.name}")
             continue
         lines += [f"    {{   // {material.name}",
                   f"        mask is = id == (lane_int){index};",
                   f"        s.albedo = v3_select(s.albedo, {albedo}, is);",
                   f"        s.specular = SELECT(s.specular, {specular}, is);",
                   f"        s.shininess = SELECT(s.shininess, {shininess}, is);",
+                  f"        s.reflectivity = SELECT(s.reflectivity, {reflectivity}, is);",
                   "    }"]
     lines += ["    return s;", "}"]
+    if scene_ir.scene.render.reflections > 0:
+        lines += ["", "real surface_reflectivity(vec3 p, __constant scalar *params) {",
+                  "    return surface_of(material_id(p, params), params).reflectivity;", "}"]
     return "\n".join(lines)
 
 
@@ -265,17 +271,19 @@ def _shade_function(scene_ir: SceneIR) -> tuple[str, list[str]]:
     return "\n".join(lines), sorted(needs)
 
 
-def features(render) -> dict[str, bool]:
+def features(render, camera) -> dict[str, bool]:
     """The template's optional effects, on where the scene uses them."""
     return {
         "GLOW": render.glow is not None and render.glow.strength > 0,
         "FOG": render.fog is not None and render.fog.density > 0,
         "DITHER": render.dither > 0,
+        "REFLECTIONS": render.reflections > 0,
+        "DEPTH_OF_FIELD": camera.aperture > 0,
     }
 
 
-def _effect_constants(render) -> list[str]:
-    on = features(render)
+def _effect_constants(render, camera) -> list[str]:
+    on = features(render, camera)
     lines = []
     if on["GLOW"]:
         glow = render.glow
@@ -286,6 +294,8 @@ def _effect_constants(render) -> list[str]:
                   f"#define FOG_DENSITY {literal(render.fog.density)}"]
     if on["DITHER"]:
         lines.append(f"#define DITHER {literal(render.dither)}")
+    if on["REFLECTIONS"]:
+        lines.append(f"#define REFLECTIONS {render.reflections}")
     return lines
 
 
@@ -330,7 +340,7 @@ def _constants(scene_ir: SceneIR, target: Target) -> str:
         f"#define HIT_EPSILON {literal(0.0 if pixel else render.epsilon)}",
         *(f"#define BACKGROUND_{c} {literal(v)}" for c, v in zip("RGB", render.background)),
         f"#define LANE_INDEX {lane_index}",
-        *_effect_constants(render),
+        *_effect_constants(render, scene_ir.scene.camera),
     ])
 
 
@@ -347,8 +357,10 @@ _HEADER = """\
 //     pitch is the tile width rounded up to a multiple of LANES. `out` gets 9
 //     planes of pitch * tile_height floats: R G B A Z N.x N.y N.z steps
 //     (linear colour; Z = +inf where the ray missed).
-//     camera: 13 values: position xyz, forward xyz, right xyz, up xyz (the
-//     orthonormal frame of LANGUAGE.md's camera model), tan(fov / 2).
+//     camera: 15 values: position xyz, forward xyz, right xyz, up xyz (the
+//     orthonormal frame of LANGUAGE.md's camera model), tan(fov / 2), lens
+//     aperture (diameter) and focus distance (the last two are read only by
+//     a kernel with depth of field; 13 values suffice otherwise).
 //     samples: anti-aliasing samples per pixel; seed: jitter seed.
 //   distance_at_points(__global const {scalar} *points, __global {scalar} *distances,
 //                      __constant {scalar} *params, int count)
@@ -383,7 +395,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         distance, material, _surface_function(scene_ir),
         _library_text(shading_functions),
         shade,
-        resolve_features(lib.template, features(scene.render)),
+        resolve_features(lib.template, features(scene.render, scene.camera)),
     ]
     source = "\n\n".join(p.strip("\n") for p in parts if p) + "\n"
     if target.double:

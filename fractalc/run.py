@@ -33,7 +33,8 @@ class Frame:
 
 
 def camera_block(camera: Camera) -> tuple[float, ...]:
-    """position, forward, right, up', tan(fov/2): LANGUAGE.md's camera model."""
+    """position, forward, right, up', tan(fov/2), aperture, focus distance:
+    LANGUAGE.md's camera model."""
     position = np.array(camera.position, dtype=np.float64)
     forward = np.array(camera.target, dtype=np.float64) - position
     forward /= np.linalg.norm(forward)
@@ -41,7 +42,10 @@ def camera_block(camera: Camera) -> tuple[float, ...]:
     right /= np.linalg.norm(right)
     up = np.cross(right, forward)
     tan_half_fov = math.tan(math.radians(camera.fov) / 2.0)
-    return tuple(float(x) for x in (*position, *forward, *right, *up, tan_half_fov))
+    focus = camera.focus if camera.focus is not None else float(
+        np.linalg.norm(np.array(camera.target, dtype=np.float64) - position))
+    return tuple(float(x) for x in (*position, *forward, *right, *up, tan_half_fov,
+                                    camera.aperture, focus))
 
 
 def _scalar(double: bool):

@@ -14,7 +14,9 @@
 #define CAMERA_RIGHT 6
 #define CAMERA_UP 9
 #define CAMERA_TAN_HALF_FOV 12
-#define CAMERA_SIZE 13
+#define CAMERA_APERTURE 13      // lens diameter (read only with depth of field)
+#define CAMERA_FOCUS 14         // distance of the plane in focus, along forward
+#define CAMERA_SIZE 15
 
 // Output planes, each `pitch * tile_height` floats.
 #define PLANE_R 0
@@ -95,6 +97,22 @@ vec3 pixel_ray(__constant scalar *camera, int width, int height, real px, real p
     return camera_ray(camera, x, y);
 }
 
+#if FEATURE_DEPTH_OF_FIELD
+// Thin-lens depth of field: the ray starts at a uniform point (u, v in
+// [0, 1)) of the lens disc and passes through the point its pinhole ray
+// meets on the plane in focus.
+void lens_sample(__constant scalar *camera, real u, real v, vec3 *origin, vec3 *dir) {
+    vec3 forward = v3(camera[CAMERA_FORWARD], camera[CAMERA_FORWARD + 1], camera[CAMERA_FORWARD + 2]);
+    vec3 right = v3(camera[CAMERA_RIGHT], camera[CAMERA_RIGHT + 1], camera[CAMERA_RIGHT + 2]);
+    vec3 up = v3(camera[CAMERA_UP], camera[CAMERA_UP + 1], camera[CAMERA_UP + 2]);
+    vec3 focus = v3_add(*origin, v3_scale(*dir, camera[CAMERA_FOCUS] / v3_dot(*dir, forward)));
+    real radius = 0.5f * camera[CAMERA_APERTURE] * sqrt(u);
+    real angle = 6.283185307179586f * v;
+    *origin = v3_add(*origin, v3_add(v3_scale(right, radius * cos(angle)), v3_scale(up, radius * sin(angle))));
+    *dir = v3_normalize(v3_sub(focus, *origin));
+}
+#endif
+
 // A per-lane hash (PCG), for stratified jitter that is the same on every run.
 lane_uint hash_lanes(lane_uint v) {
     lane_uint state = v * 747796405u + 2891336453u;
@@ -116,8 +134,43 @@ vec3 hit_normal(vec3 origin, vec3 dir, march_result m, scalar pixel_angle, __con
     return normal;
 }
 
+#if FEATURE_REFLECTIONS
+// Mirror reflections, up to REFLECTIONS bounces (no recursion): each surface
+// keeps (1 - reflectivity) of its own colour and passes reflectivity on to
+// what its mirror direction sees; a bounce that misses sees the background.
+vec3 reflected_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 seen_first,
+                     scalar pixel_angle, __constant scalar *params) {
+    mask active = m.hit;
+    vec3 p = v3_add(origin, v3_scale(dir, m.t));
+    real threshold = hit_threshold(m.t, pixel_angle);
+    real weight = 1.0f;
+    vec3 seen_now = seen_first;
+    vec3 color = v3((real)0.0f, 0.0f, 0.0f);
+    for (int bounce = 0; bounce < REFLECTIONS; bounce++) {
+        real reflectivity = SELECT((real)0.0f, surface_reflectivity(p, params), active);
+        color = v3_add(color, v3_scale(seen_now, weight * (1.0f - reflectivity)));
+        weight = weight * reflectivity;
+        active = active & (reflectivity > 0.0f);
+        if (!ANY(active))
+            return color;
+        dir = v3_sub(dir, v3_scale(normal, 2.0f * v3_dot(dir, normal)));
+        vec3 start = v3_add(p, v3_scale(normal, 2.0f * threshold));
+        march_result b = march(start, dir, active, pixel_angle, 0.0f, params);
+        normal = hit_normal(start, dir, b, pixel_angle, params);
+        p = v3_add(start, v3_scale(dir, b.t));
+        threshold = hit_threshold(b.t, pixel_angle);
+        vec3 seen = v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);
+        if (ANY(b.hit))
+            seen = v3_select(seen, shade(p, normal, dir, threshold, b.steps, b.hit, params), b.hit);
+        seen_now = v3_select(seen_now, seen, active);
+        active = active & b.hit;
+    }
+    return v3_add(color, v3_scale(seen_now, weight));
+}
+#endif
+
 // Colour seen along one ray: the shaded surface or the background, then
-// glow and fog.
+// reflections, glow and fog.
 vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel_angle,
                  __constant scalar *params) {
     vec3 color = v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);
@@ -135,6 +188,9 @@ vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixe
     // Exponential fog: a miss is infinitely far and shows the fog colour.
     real clear = SELECT((real)0.0f, exp(-FOG_DENSITY * m.t), m.hit);
     color = v3_add(v3_scale(color, clear), v3_scale(v3(FOG_R, FOG_G, FOG_B), 1.0f - clear));
+#endif
+#if FEATURE_REFLECTIONS
+    color = reflected_color(origin, dir, m, normal, color, pixel_angle, params);
 #endif
     return color;
 }
@@ -165,7 +221,12 @@ __kernel void render(__global float *out, __constant scalar *params,
     vec3 normal = hit_normal(origin, dir, centre, pixel_angle, params);
 
     vec3 color;
-    if (samples == 1) {
+#if FEATURE_DEPTH_OF_FIELD
+    bool pinhole = false;   // every sample goes through the lens
+#else
+    bool pinhole = samples == 1;
+#endif
+    if (pinhole) {
         color = trace_color(origin, dir, centre, normal, pixel_angle, params);
     } else {
         // Stratified: a grid x grid array of cells over the pixel, samples
@@ -176,10 +237,15 @@ __kernel void render(__global float *out, __constant scalar *params,
             lane_uint key = hash_lanes(pixel_id * (uint)samples + (uint)s) ^ seed;
             real jx = ((real)(s % grid) + unit_random(key)) / (scalar)grid;
             real jy = ((real)(s / grid) + unit_random(key ^ 0x9e3779b9u)) / (scalar)grid;
+            vec3 sample_origin = origin;
             vec3 sample_dir = pixel_ray(camera, width, height, px + jx, py + jy);
-            march_result m = march(origin, sample_dir, inside, pixel_angle, jitter, params);
-            vec3 sample_normal = hit_normal(origin, sample_dir, m, pixel_angle, params);
-            color = v3_add(color, trace_color(origin, sample_dir, m, sample_normal, pixel_angle, params));
+#if FEATURE_DEPTH_OF_FIELD
+            lens_sample(camera, unit_random(key ^ 0x85ebca6bu), unit_random(key ^ 0xc2b2ae35u),
+                        &sample_origin, &sample_dir);
+#endif
+            march_result m = march(sample_origin, sample_dir, inside, pixel_angle, jitter, params);
+            vec3 sample_normal = hit_normal(sample_origin, sample_dir, m, pixel_angle, params);
+            color = v3_add(color, trace_color(sample_origin, sample_dir, m, sample_normal, pixel_angle, params));
         }
         color = v3_scale(color, (real)(1.0f / (scalar)samples));
     }
