@@ -98,7 +98,7 @@ class _Checker:
                 self.declare_param(decl)
         self.materials[DEFAULT_MATERIAL] = Material(
             DEFAULT_MATERIAL, ir.vec(*(ir.const(0.8) for _ in range(3))),
-            ir.const(0.3), ir.const(32.0), ir.const(0.0))
+            ir.const(0.3), ir.const(32.0), ir.const(0.0), ir.const(0.0), ir.const(1.5))
         for name, decl in self.material_decls.items():
             self.materials[name] = self.material(decl)
         for name in self.lets:
@@ -507,7 +507,9 @@ class _Checker:
         return Material(decl.name, found.get("color", default.color),
                         found.get("specular", default.specular),
                         found.get("shininess", default.shininess),
-                        found.get("reflectivity", default.reflectivity))
+                        found.get("reflectivity", default.reflectivity),
+                        found.get("transparency", default.transparency),
+                        found.get("ior", default.ior))
 
     def camera(self, decl: ast.CameraDecl | None) -> Camera:
         errors_before = len(self.errors)
@@ -592,7 +594,8 @@ def _P(name: str, type_: str, default=None, *constraints: str) -> Parameter:
 
 
 MATERIAL_KEYS = _keys(_P("color", "vec3", None, "0..1000"), _P("specular", "num", None, "0..1"),
-                      _P("shininess", "num", None, ">0"), _P("reflectivity", "num", None, "0..1"))
+                      _P("shininess", "num", None, ">0"), _P("reflectivity", "num", None, "0..1"),
+                      _P("transparency", "num", None, "0..1"), _P("ior", "num", None, "1..10"))
 CAMERA_KEYS = _keys(_P("position", "vec3"), _P("target", "vec3"), _P("up", "vec3", None, "nonzero"),
                     _P("fov", "num", None, ">0", "<180"), _P("aperture", "num", None, ">=0"),
                     _P("focus", "num", None, ">0"))

@@ -180,15 +180,17 @@ def _vector(v) -> str:
 
 def _surface_function(scene_ir: SceneIR) -> str:
     """Material properties by id, chosen per lane with selects."""
-    lines = ["typedef struct { vec3 albedo; real specular, shininess, reflectivity; } surface;", "",
+    lines = ["typedef struct { vec3 albedo; real specular, shininess, reflectivity, transparency, ior; } surface;",
+             "",
              "surface surface_of(lane_int id, __constant scalar *params) {"]
     for index, material in enumerate(scene_ir.materials):
         albedo = f"v3({', '.join(_uniform(x) for x in material.color.items)})"
         specular, shininess = _uniform(material.specular), _uniform(material.shininess)
         reflectivity = _uniform(material.reflectivity)
+        transparency, ior = _uniform(material.transparency), _uniform(material.ior)
         if index == 0:
-            lines.append(f"    surface s = {{ {albedo}, {specular}, {shininess}, {reflectivity} }};"
-                         f"  // {material.name}")
+            lines.append(f"    surface s = {{ {albedo}, {specular}, {shininess}, {reflectivity}, "
+                         f"{transparency}, {ior} }};  // {material.name}")
             continue
         lines += [f"    {{   // {material.name}",
                   f"        mask is = id == (lane_int){index};",
@@ -196,6 +198,8 @@ def _surface_function(scene_ir: SceneIR) -> str:
                   f"        s.specular = SELECT(s.specular, {specular}, is);",
                   f"        s.shininess = SELECT(s.shininess, {shininess}, is);",
                   f"        s.reflectivity = SELECT(s.reflectivity, {reflectivity}, is);",
+                  f"        s.transparency = SELECT(s.transparency, {transparency}, is);",
+                  f"        s.ior = SELECT(s.ior, {ior}, is);",
                   "    }"]
     lines += ["    return s;", "}"]
     if scene_ir.scene.render.reflections > 0:
@@ -271,19 +275,21 @@ def _shade_function(scene_ir: SceneIR) -> tuple[str, list[str]]:
     return "\n".join(lines), sorted(needs)
 
 
-def features(render, camera) -> dict[str, bool]:
+def features(render, camera, materials) -> dict[str, bool]:
     """The template's optional effects, on where the scene uses them."""
+    transparent = any(not (ir.is_const(m.transparency) and m.transparency.value == 0)
+                      for m in materials)
     return {
         "GLOW": render.glow is not None and render.glow.strength > 0,
         "FOG": render.fog is not None and render.fog.density > 0,
         "DITHER": render.dither > 0,
         "REFLECTIONS": render.reflections > 0,
         "DEPTH_OF_FIELD": camera.aperture > 0,
+        "TRANSPARENCY": transparent,
     }
 
 
-def _effect_constants(render, camera) -> list[str]:
-    on = features(render, camera)
+def _effect_constants(render, on: dict[str, bool]) -> list[str]:
     lines = []
     if on["GLOW"]:
         glow = render.glow
@@ -297,6 +303,10 @@ def _effect_constants(render, camera) -> list[str]:
     if on["REFLECTIONS"]:
         lines.append(f"#define REFLECTIONS {render.reflections}")
     return lines
+
+
+def _scene_features(scene_ir: SceneIR) -> dict[str, bool]:
+    return features(scene_ir.scene.render, scene_ir.scene.camera, scene_ir.materials)
 
 
 _FEATURE_IF = re.compile(r"^#if FEATURE_(\w+)\s*$")
@@ -340,7 +350,7 @@ def _constants(scene_ir: SceneIR, target: Target) -> str:
         f"#define HIT_EPSILON {literal(0.0 if pixel else render.epsilon)}",
         *(f"#define BACKGROUND_{c} {literal(v)}" for c, v in zip("RGB", render.background)),
         f"#define LANE_INDEX {lane_index}",
-        *_effect_constants(render, scene_ir.scene.camera),
+        *_effect_constants(render, _scene_features(scene_ir)),
     ])
 
 
@@ -395,7 +405,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         distance, material, _surface_function(scene_ir),
         _library_text(shading_functions),
         shade,
-        resolve_features(lib.template, features(scene.render, scene.camera)),
+        resolve_features(lib.template, _scene_features(scene_ir)),
     ]
     source = "\n\n".join(p.strip("\n") for p in parts if p) + "\n"
     if target.double:

@@ -69,6 +69,8 @@ class Material:
     specular: ir.Expr
     shininess: ir.Expr
     reflectivity: ir.Expr
+    transparency: ir.Expr
+    ior: ir.Expr
 
 
 DEFAULT_MATERIAL = "default"

@@ -169,8 +169,57 @@ vec3 reflected_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 se
 }
 #endif
 
+#if FEATURE_TRANSPARENCY
+// Snell refraction of `dir` at a surface with `normal` facing it, for the
+// ratio eta = n_from / n_to; under total internal reflection the ray goes on
+// unbent (one transmission per ray, no internal bounces).
+vec3 refracted(vec3 dir, vec3 normal, real eta) {
+    real cos_in = -v3_dot(dir, normal);
+    real k = 1.0f - eta * eta * (1.0f - cos_in * cos_in);
+    vec3 bent = v3_add(v3_scale(dir, eta), v3_scale(normal, eta * cos_in - sqrt(max(k, 0.0f))));
+    return v3_select(v3_normalize(bent), dir, k < 0.0f);
+}
+
+// Transparency (seed 000, seed 004): the ray refracts into the solid,
+// marches inside it (where the distance estimate is negative) to its far
+// side, refracts out, and what it sees there is mixed in by `transparency`.
+vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 seen,
+                       scalar pixel_angle, __constant scalar *params) {
+    vec3 p = v3_add(origin, v3_scale(dir, m.t));
+    surface s = surface_of(material_id(p, params), params);
+    mask active = m.hit & (s.transparency > 0.0f);
+    if (!ANY(active))
+        return seen;
+    real threshold = hit_threshold(m.t, pixel_angle);
+    vec3 inside_dir = refracted(dir, normal, 1.0f / s.ior);
+    vec3 start = v3_sub(p, v3_scale(normal, 2.0f * threshold));
+    real t = 0.0f;
+    mask marching = active;
+    for (int i = 0; i < MAX_STEPS && ANY(marching); i++) {
+        real depth = -distance_estimate(v3_add(start, v3_scale(inside_dir, t)), params);
+        marching = marching & (depth >= threshold);
+        t = SELECT(t, t + max(depth, threshold), marching);
+        marching = marching & (t < (real)MAX_DISTANCE);
+    }
+    vec3 exit = v3_add(start, v3_scale(inside_dir, t));
+    vec3 exit_normal = estimate_normal(exit, threshold, params);
+    vec3 out_dir = refracted(inside_dir, v3_scale(exit_normal, -1.0f), s.ior);
+    vec3 out_start = v3_add(exit, v3_scale(exit_normal, 2.0f * threshold));
+    march_result beyond = march(out_start, out_dir, active, pixel_angle, 0.0f, params);
+    vec3 beyond_normal = hit_normal(out_start, out_dir, beyond, pixel_angle, params);
+    vec3 far = v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);
+    if (ANY(beyond.hit)) {
+        vec3 q = v3_add(out_start, v3_scale(out_dir, beyond.t));
+        far = v3_select(far, shade(q, beyond_normal, out_dir, hit_threshold(beyond.t, pixel_angle),
+                                   beyond.steps, beyond.hit, params), beyond.hit);
+    }
+    real mixing = SELECT((real)0.0f, s.transparency, active);
+    return v3_add(v3_scale(seen, 1.0f - mixing), v3_scale(far, mixing));
+}
+#endif
+
 // Colour seen along one ray: the shaded surface or the background, then
-// reflections, glow and fog.
+// transparency, reflections, glow and fog.
 vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel_angle,
                  __constant scalar *params) {
     vec3 color = v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);
@@ -188,6 +237,9 @@ vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixe
     // Exponential fog: a miss is infinitely far and shows the fog colour.
     real clear = SELECT((real)0.0f, exp(-FOG_DENSITY * m.t), m.hit);
     color = v3_add(v3_scale(color, clear), v3_scale(v3(FOG_R, FOG_G, FOG_B), 1.0f - clear));
+#endif
+#if FEATURE_TRANSPARENCY
+    color = transmitted_color(origin, dir, m, normal, color, pixel_angle, params);
 #endif
 #if FEATURE_REFLECTIONS
     color = reflected_color(origin, dir, m, normal, color, pixel_angle, params);

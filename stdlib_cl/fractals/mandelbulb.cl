@@ -1,0 +1,60 @@
+// The Mandelbulb (White and Nylander's power-n "triplex" z -> z^n + p) and
+// its distance estimate DE = 0.5 ln(r) r / dr with the analytic running
+// scalar derivative dr -> n r^(n-1) dr + 1: Syntopia, "Distance Estimated 3D
+// Fractals", parts IV and V; the formulas of LANGUAGE.md, "Fractals".
+//
+// Overflow, so that the estimate stays finite for every valid argument:
+// - r^power is at most 1e12 on a step that keeps iterating. A step whose
+//   r^power exceeds it escapes: the new z and dr are stored divided by
+//   r^power, whose logarithm goes to `log_scale`; the final
+//   DE = 0.5 (log_scale + ln|z|) |z| / dr is then the same number.
+//   (An orbit passing |z| ~ 1e12 is treated as escaped even if the bailout
+//   is larger than that.)
+// - dr is capped at 1e24 (only orbits that stay bounded get there, whose
+//   DE is then below 1e-20 either way), so n r^(n-1) dr stays below 1e38.
+
+//: fractal mandelbulb(power: num = 8 1..32, iterations: int = 12 1..1000, bailout: num = 2 >0)
+real de_mandelbulb(vec3 p, real power, int iterations, real bailout) {
+    vec3 z = p;
+    real dr = 1.0f;
+    real log_scale = 0.0f;
+    mask active = MASK_TRUE;
+    for (int i = 0; i < iterations; i++) {
+        real r = v3_length(z);
+        active = active & (r <= bailout);
+        if (!ANY(active)) break;
+        // Spherical coordinates, angles multiplied by the power (theta = 0 at r = 0).
+        real theta = SELECT(acos(clamp(z.z / r, -1.0f, 1.0f)), (real)0.0f, r == 0.0f) * power;
+        real phi = atan2(z.y, z.x) * power;
+        vec3 direction = v3(sin(theta) * cos(phi), sin(phi) * sin(theta), cos(theta));
+        real r_power1 = pow(r, power - 1.0f);
+        real r_power = r_power1 * r;
+        mask escapes = r_power > 1e12f;
+        // z = r^power direction + p, dr = power r^(power-1) dr + 1 ...
+        vec3 z_next = v3_add(v3_scale(direction, r_power), p);
+        real dr_next = min(power * r_power1 * dr + 1.0f, 1e24f);
+        // ... or both divided by r^power when that is too large.
+        real log_power = power * log(r);
+        real inverse = exp(-log_power);
+        vec3 z_scaled = v3_add(direction, v3_scale(p, inverse));
+        real dr_scaled = power * dr / r + inverse;
+        z = v3_select(z, v3_select(z_next, z_scaled, escapes), active);
+        dr = SELECT(dr, SELECT(dr_next, dr_scaled, escapes), active);
+        log_scale = SELECT(log_scale, log_power, active & escapes);
+        active = active & !escapes;
+    }
+    real r = v3_length(z);
+    real de = 0.5f * (log(r) + log_scale) * r / dr;
+    // DE = 0 at r = 0; a point too far for |p| to be a float is far away.
+    return SELECT(min(de, 1e30f), (real)0.0f, r == 0.0f);
+}
+
+// A sphere holding every point where the DE can be <= 0, i.e. where the
+// final |z| can be <= 1. Let R = |p| with R^(power-1) >= 2 (so R > 1). If
+// |z| >= R then |z^power + p| >= |z|^power - R >= 2|z| - R >= |z|: |z| never
+// falls below R > 1, so the DE is > 0 for |p| >= 2^(1/(power-1)). Power 1 is
+// z -> z + p, z_n = (n+1) p, and |p| > 1 suffices. Near power 1 the radius
+// grows without bound (+inf in float: no bound).
+real mandelbulb_bound_radius(real power, int iterations, real bailout) {
+    return SELECT(pow((real)2.0f, 1.0f / (power - 1.0f)), (real)1.0f, power <= 1.0f);
+}
