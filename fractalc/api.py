@@ -54,10 +54,10 @@ class Scene:
 
     def __init__(self, checked: CheckedScene, params: dict | None = None,
                  precision: str | None = None, device: str | None = None):
-        self.checked = checked
-        self.precision = precision or checked.render.precision
-        if self.precision not in PRECISIONS:
-            raise ValueError(f"precision must be 'float' or 'double', not {self.precision!r}")
+        precision = precision or checked.render.precision
+        if precision not in PRECISIONS:
+            raise ValueError(f"precision must be 'float' or 'double', not {precision!r}")
+        self.checked = replace(checked, render=replace(checked.render, precision=precision))
         self.device_spec = device
         self.params = {p.name: p.default for p in checked.params}
         self.set_params(params or {})
@@ -89,8 +89,12 @@ class Scene:
     def device(self):
         return open_device(self.device_spec)
 
-    def _target(self, lanes: int | None = None) -> Target:
-        double = self.precision == "double"
+    @property
+    def precision(self) -> str:
+        return self.checked.render.precision
+
+    def _target(self, settings: RenderSettings, lanes: int | None = None) -> Target:
+        double = settings.precision == "double"
         if lanes is None:
             device = self.device
             if double and not device.info.double:
@@ -102,12 +106,12 @@ class Scene:
         """The standalone OpenCL C source (no includes) for this scene."""
         settings = self._settings(render_keys)
         scene = replace(self.checked, render=settings)
-        return emit(lower(scene), self._target(lanes))
+        return emit(lower(scene), self._target(settings, lanes))
 
     def _program(self, settings: RenderSettings):
         # Size and samples are kernel arguments: keep them out of the source.
         compiled = replace(settings, **{k: getattr(RenderSettings(), k) for k in _RUNTIME_KEYS})
-        target = self._target()
+        target = self._target(settings)
         source = emit(lower(replace(self.checked, render=compiled)), target)
         return build(source, self.device), target
 
@@ -158,7 +162,7 @@ class Scene:
             "camera.position": vector(camera.position), "camera.target": vector(camera.target),
             "camera.up": vector(camera.up), "camera.fov": f"{camera.fov:g}",
             "params": " ".join(f"{k}={v:g}" for k, v in self.params.items()),
-            "precision": self.precision,
+            "precision": settings.precision,
             "device": self.device.info.name,
         }
         for f in fields(RenderSettings):

@@ -80,8 +80,8 @@ def _device(spec: str | None):
             raise RenderError(f"no OpenCL device {spec}: there are {len(devices)} "
                               "(see 'fractalc devices')")
         return devices[int(spec)]
-    for device in devices:
-        if spec.lower() in f"{device.platform.name} {device.name}".lower():
+    for index, device in enumerate(devices):
+        if spec.lower() in f"{device.platform.name} {device.name} {_describe(index, device).kind}".lower():
             return device
     raise RenderError(f"no OpenCL device matches '{spec}' (see 'fractalc devices')")
 
@@ -102,7 +102,8 @@ class Device:
 
 @lru_cache(maxsize=None)
 def open_device(spec: str | None = None) -> Device:
-    """The device named by `spec` (index or name substring), else
+    """The device named by `spec` (index, or a substring of its platform,
+    name or kind: "gpu", "cpu"), else
     $FRACTALC_DEVICE, else the first GPU, else the first device."""
     cl = _cl()
     device = _device(spec)

@@ -112,8 +112,8 @@ def _parser() -> argparse.ArgumentParser:
                        help="set a param (repeatable); no recompilation")
         p.add_argument("--precision", choices=("float", "double"),
                        help="arithmetic of the whole kernel (default: the file's, else float)")
-        p.add_argument("--device", help="OpenCL device: index or name substring (see 'fractalc devices'; "
-                                        "also $FRACTALC_DEVICE)")
+        p.add_argument("--device", help="OpenCL device: index, name substring, 'cpu' or 'gpu' "
+                                        "(see 'fractalc devices'; also $FRACTALC_DEVICE)")
 
     render = commands.add_parser("render", help="render a scene to EXR or PNG",
                                  description="Render a scene. EXR: linear float with Z, normals and "
