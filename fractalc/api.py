@@ -21,7 +21,7 @@ from .emit import Target, emit
 from .errors import RenderError, SceneError, diagnostic
 from .lower import lower
 from .parse import parse
-from .program import CheckedScene, RenderSettings
+from .program import Camera, CheckedScene, RenderSettings
 from .write import write
 
 PRECISIONS = ("float", "double")
@@ -108,12 +108,20 @@ class Scene:
         scene = replace(self.checked, render=settings)
         return emit(lower(scene), self._target(settings, lanes))
 
-    def _program(self, settings: RenderSettings):
-        # Size and samples are kernel arguments: keep them out of the source.
+    def compile(self, use_cache: bool = True, **render_keys):
+        """Build the render kernel now (it is otherwise built on first use);
+        `use_cache=False` compiles even if this process built it before."""
+        settings = self._settings(render_keys)
+        return self._program(settings, use_cache=use_cache)[0]
+
+    def _program(self, settings: RenderSettings, camera: Camera | None = None, use_cache: bool = True):
+        # Size, samples and the camera are kernel arguments: keep them out of
+        # the source (only whether the lens has an aperture shapes the kernel).
         compiled = replace(settings, **{k: getattr(RenderSettings(), k) for k in _RUNTIME_KEYS})
+        lens = Camera(aperture=1.0 if (camera or self.checked.camera).aperture > 0 else 0.0)
         target = self._target(settings)
-        source = emit(lower(replace(self.checked, render=compiled)), target)
-        return build(source, self.device), target
+        source = emit(lower(replace(self.checked, render=compiled, camera=lens)), target)
+        return build(source, self.device, use_cache=use_cache), target
 
     def _settings(self, overrides: dict) -> RenderSettings:
         settings = self.checked.render
@@ -134,13 +142,16 @@ class Scene:
         return run.distances(program, self.device, points, self._param_values(),
                              target.lanes, target.double)
 
-    def render(self, seed: int = 0, progress: bool = False, **render_keys) -> Image:
+    def render(self, seed: int = 0, progress: bool = False, camera: Camera | None = None,
+               **render_keys) -> Image:
         """Render with the file's settings, overridden by keyword (any render
-        key: width=, height=, samples=, ao=, max_steps=, ...)."""
+        key: width=, height=, samples=, ao=, max_steps=, ...); `camera`
+        replaces the file's camera (no rebuild)."""
         settings = self._settings(render_keys)
-        program, target = self._program(settings)
+        camera = camera or self.checked.camera
+        program, target = self._program(settings, camera)
         frame = run.Frame(settings.width, settings.height, settings.samples, seed,
-                          run.camera_block(self.checked.camera))
+                          run.camera_block(camera))
         bar = run.terminal_progress(settings.width * settings.height) if progress else None
         try:
             planes = run.render(program, self.device, frame, self._param_values(), target.lanes,
@@ -150,10 +161,9 @@ class Scene:
                 bar.close()
         rgba = np.stack([planes[c] for c in "RGBA"], axis=-1)
         normal = np.stack([planes[f"N.{c}"] for c in "xyz"], axis=-1)
-        return Image(rgba, planes["Z"], normal, planes["steps"], self._metadata(settings))
+        return Image(rgba, planes["Z"], normal, planes["steps"], self._metadata(settings, camera))
 
-    def _metadata(self, settings: RenderSettings) -> dict[str, str]:
-        camera = self.checked.camera
+    def _metadata(self, settings: RenderSettings, camera: Camera) -> dict[str, str]:
         vector = lambda v: " ".join(f"{x:g}" for x in v)  # noqa: E731
         metadata = {
             "version": __version__,

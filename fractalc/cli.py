@@ -43,7 +43,7 @@ def _load(args):
 def _write_text_atomically(path: str, text: str) -> None:
     import tempfile
     directory = os.path.dirname(os.path.abspath(path))
-    handle, temporary = tempfile.mkstemp(prefix=".fractalc-", suffix=".cl", dir=directory)
+    handle, temporary = tempfile.mkstemp(prefix=".fractalc-", suffix=os.path.splitext(path)[1], dir=directory)
     try:
         with os.fdopen(handle, "w") as f:
             f.write(text)
@@ -101,6 +101,28 @@ def command_devices(args) -> int:
     return 0
 
 
+def command_bench(args) -> int:
+    import json
+    from .bench import RESOLUTIONS, bench, table
+    width, height = args.width, args.height
+    if args.resolution:
+        key = args.resolution.lower()
+        if key not in RESOLUTIONS:
+            raise UsageError(f"--resolution {args.resolution}: choose one of {', '.join(RESOLUTIONS)}")
+        width, height = RESOLUTIONS[key]
+    for name, value in (("--frames", args.frames), ("--repeat", args.repeat), ("--width", width),
+                        ("--height", height)):
+        if value is not None and value < 1:
+            raise UsageError(f"{name} must be at least 1")
+    scene = _load(args)
+    result = bench(scene, frames=args.frames, width=width, height=height, repeat=args.repeat,
+                   use_cache=not args.no_cache)
+    print(table(result))
+    if args.json:
+        _write_text_atomically(args.json, json.dumps(result.as_dict(), indent=2) + "\n")
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="fractalc", description="Compile and render .frac fractal scenes.")
     from . import __version__
@@ -143,6 +165,21 @@ def _parser() -> argparse.ArgumentParser:
     check_.add_argument("scene")
     check_.set_defaults(run=command_check)
 
+    bench_ = commands.add_parser("bench", help="measure frame times along a camera orbit",
+                                 description="The benchmark of seed 000: render --frames frames along an "
+                                             "orbit of the camera about its target; report frame-time "
+                                             "statistics, compile time and the machine.")
+    bench_.add_argument("scene")
+    bench_.add_argument("--frames", type=int, default=30)
+    bench_.add_argument("--width", type=int)
+    bench_.add_argument("--height", type=int)
+    bench_.add_argument("--resolution", help="1366x768, 1920x1080, 2560x1440, 3840x2160 (or 720p, 1080p, 1440p, 4k)")
+    bench_.add_argument("--repeat", type=int, default=1, help="runs of the whole path; figures are medians")
+    bench_.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
+    bench_.add_argument("--no-cache", action="store_true", help="compile the kernel even if it is cached")
+    device_options(bench_)
+    bench_.set_defaults(run=command_bench)
+
     devices = commands.add_parser("devices", help="list OpenCL devices")
     devices.set_defaults(run=command_devices)
     return parser
@@ -151,6 +188,10 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
+    if getattr(args, "no_cache", False):
+        # Before OpenCL loads: the driver's and pyopencl's binary caches.
+        os.environ["POCL_KERNEL_CACHE"] = "0"
+        os.environ["PYOPENCL_NO_CACHE"] = "1"
     try:
         return args.run(args)
     except SceneError as error:

@@ -1,0 +1,137 @@
+"""`fractalc bench`: the dissertation seed's benchmark (seed 000, 5.2).
+
+The camera orbits the scene's target about its up axis for a fixed number
+of frames at a fixed resolution; we report frame-time statistics, compile
+time apart from frame time, and the machine they were measured on.
+"""
+from __future__ import annotations
+
+import math
+import os
+import platform
+import statistics
+import time
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+
+from .api import Scene
+from .program import Camera
+
+RESOLUTIONS = {"1366x768": (1366, 768), "1920x1080": (1920, 1080), "2560x1440": (2560, 1440),
+               "3840x2160": (3840, 2160), "720p": (1280, 720), "1080p": (1920, 1080),
+               "1440p": (2560, 1440), "4k": (3840, 2160)}
+
+
+@dataclass(frozen=True)
+class BenchResult:
+    scene: str
+    width: int
+    height: int
+    frames: int
+    repeat: int
+    compile_seconds: float
+    duration_seconds: float
+    frame_ms_min: float
+    frame_ms_avg: float
+    frame_ms_max: float
+    fps_avg: float
+    fps_min: float
+    fps_max: float
+    device: str
+    platform: str
+    driver: str
+    opencl_version: str
+    cpu: str
+    cores: int
+    memory_gib: float
+    precision: str
+    lanes: int
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def orbit_camera(camera: Camera, frame: int, frames: int) -> Camera:
+    """The camera turned by 360 * frame / frames degrees about the up axis
+    through its target (Rodrigues)."""
+    angle = 2.0 * math.pi * frame / frames
+    axis = np.asarray(camera.up, dtype=np.float64)
+    axis /= np.linalg.norm(axis)
+    target = np.asarray(camera.target, dtype=np.float64)
+    offset = np.asarray(camera.position, dtype=np.float64) - target
+    c, s = math.cos(angle), math.sin(angle)
+    turned = offset * c + np.cross(axis, offset) * s + axis * np.dot(axis, offset) * (1.0 - c)
+    return replace(camera, position=tuple(float(x) for x in target + turned))
+
+
+def _cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _memory_gib() -> float:
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2 ** 30
+    except (ValueError, OSError, AttributeError):
+        return float("nan")
+
+
+def frame_statistics(frame_seconds: list[float]) -> dict[str, float]:
+    """min/avg/max frame time in ms and the FPS each implies (1000 / ms)."""
+    ms = [s * 1000.0 for s in frame_seconds]
+    low, mean, high = min(ms), sum(ms) / len(ms), max(ms)
+    return {"frame_ms_min": low, "frame_ms_avg": mean, "frame_ms_max": high,
+            "fps_avg": 1000.0 / mean, "fps_min": 1000.0 / high, "fps_max": 1000.0 / low,
+            "duration_seconds": sum(frame_seconds)}
+
+
+def bench(scene: Scene, frames: int = 30, width: int | None = None, height: int | None = None,
+          repeat: int = 1, use_cache: bool = True) -> BenchResult:
+    """Render `frames` frames along the orbit, `repeat` times; figures are
+    medians over the repeats."""
+    settings = scene.checked.render
+    width, height = width or settings.width, height or settings.height
+    start = time.perf_counter()
+    scene.compile(use_cache=use_cache)
+    compile_seconds = time.perf_counter() - start
+    runs = []
+    for _ in range(repeat):
+        seconds = []
+        for i in range(frames):
+            camera = orbit_camera(scene.checked.camera, i, frames)
+            start = time.perf_counter()
+            scene.render(width=width, height=height, camera=camera)
+            seconds.append(time.perf_counter() - start)
+        runs.append(frame_statistics(seconds))
+    medians = {key: statistics.median(run[key] for run in runs) for key in runs[0]}
+    info = scene.device.info
+    return BenchResult(
+        scene=scene.checked.file, width=width, height=height, frames=frames, repeat=repeat,
+        compile_seconds=compile_seconds, **medians, device=info.name, platform=info.platform,
+        driver=info.driver, opencl_version=info.version, cpu=_cpu_model(), cores=os.cpu_count() or 0,
+        memory_gib=round(_memory_gib(), 1), precision=scene.precision, lanes=scene.device.lanes)
+
+
+def table(result: BenchResult) -> str:
+    r = result
+    rows = [
+        ("scene", r.scene),
+        ("resolution", f"{r.width}x{r.height}"),
+        ("frames", f"{r.frames} (orbit; medians of {r.repeat} run{'s' if r.repeat > 1 else ''})"),
+        ("compile", f"{r.compile_seconds:.3f} s"),
+        ("duration", f"{r.duration_seconds:.3f} s"),
+        ("frame time", f"min {r.frame_ms_min:.1f} ms, avg {r.frame_ms_avg:.1f} ms, max {r.frame_ms_max:.1f} ms"),
+        ("FPS", f"avg {r.fps_avg:.2f}, min {r.fps_min:.2f}, max {r.fps_max:.2f}"),
+        ("device", f"{r.device} ({r.platform}; {r.opencl_version}; driver {r.driver})"),
+        ("kernel", f"{r.precision}, {r.lanes} ray{'s' if r.lanes > 1 else ''} per work-item"),
+        ("machine", f"{r.cpu}, {r.cores} cores, {r.memory_gib} GiB"),
+    ]
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
