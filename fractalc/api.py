@@ -16,7 +16,7 @@ import numpy as np
 
 from . import __version__, run
 from .build import build, open_device
-from .check import RENDER_KEYS, check, check_value
+from .check import RENDER_KEYS, check, check_param_values, check_value
 from .emit import Target, emit
 from .errors import RenderError, SceneError, diagnostic
 from .lower import lower
@@ -79,6 +79,7 @@ class Scene:
                                              f"'{name}' = {value:g} is outside its range "
                                              f"[{info.low:g}, {info.high:g}]")])
             self.params[name] = value
+        check_param_values(self.checked, self._param_values())
 
     def _param_values(self) -> list[float]:
         return [self.params[p.name] for p in self.checked.params]

@@ -14,8 +14,8 @@ from dataclasses import dataclass, replace
 from . import ast, ir
 from .errors import Diagnostic, SceneError, Span, diagnostic
 from .program import (DEFAULT_MATERIAL, Camera, CheckedScene, Combination, Fog, Glow, Light,
-                      Material, ParamInfo, Primitive, RenderSettings, Slice, Transformed,
-                      WithMaterial)
+                      Material, ParamCheck, ParamInfo, Primitive, RenderSettings, Slice,
+                      Transformed, WithMaterial)
 from .stdlib import COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
 
 # The language's value types.
@@ -58,6 +58,7 @@ class _Checker:
         self.material_decls: dict[str, ast.MaterialDecl] = {}
         self.materials: dict[str, Material] = {}
         self.colors: dict[tuple, str] = {}
+        self.param_checks: list[ParamCheck] = []
 
     # ---- diagnostics -------------------------------------------------------
 
@@ -119,8 +120,11 @@ class _Checker:
         render = self.render(singles.get(ast.RenderDecl))
         if self.errors:
             raise SceneError(self.errors)
-        return CheckedScene(self.program.file, self.program.source, tuple(self.params.values()),
-                            self.materials, shape, camera, tuple(l for l in lights if l), render)
+        scene = CheckedScene(self.program.file, self.program.source, tuple(self.params.values()),
+                             self.materials, shape, camera, tuple(l for l in lights if l), render,
+                             tuple(self.param_checks))
+        check_param_values(scene, [p.default for p in scene.params])
+        return scene
 
     def declare_param(self, decl: ast.ParamDecl) -> None:
         default = self.constant_number(decl.default, "a param's value")
@@ -314,7 +318,9 @@ class _Checker:
                           others: dict | None = None) -> None:
         items = data.items if isinstance(data, ir.Vec) else (data,)
         if not all(isinstance(x, ir.Const) for x in items):
-            return   # depends on a param: the param's own range guards it
+            if param.constraints or param.type == "int":
+                self.param_checks.append(ParamCheck(span, data, param, owner))
+            return   # depends on a param: checked for each set of param values
         values = [x.value for x in items]
         shown = f"{values[0]:g}" if len(values) == 1 else "(" + ", ".join(f"{v:g}" for v in values) + ")"
         if param.type == "int" and any(v != math.floor(v) for v in values):
@@ -616,7 +622,8 @@ RENDER_KEYS = _keys(
     _P("samples", "int", None, ">=1", "<=4096"), _P("background", "vec3", None, ">=0"),
     _P("precision", "word:float|double"), _P("reflections", "int", None, "0..16"),
     _P("glow", "block:glow"), _P("fog", "block:fog"), _P("slice", "block:slice"),
-    _P("ao_method", "word:normal|steps"), _P("dither", "num", None, "0..1"))
+    _P("ao_method", "word:normal|steps"), _P("dither", "num", None, "0..1"),
+    _P("overrelax", "num", None, "1..1.99"))
 
 
 def check(program: ast.Program) -> CheckedScene:
@@ -628,6 +635,18 @@ def check_value(param: Parameter, key: str, value):
     """Validate a render setting given from Python or the command line
     (type and range, as in a file); raise ValueError saying what is wrong."""
     checker = _Checker(ast.Program((), "<arguments>", ""))
+    if param.type in BLOCK_KEYS:
+        keys, defaults = BLOCK_KEYS[param.type]
+        if value is False:
+            return None                                  # the effect off
+        if isinstance(value, type(defaults)):
+            value = {f: getattr(value, f) for f in keys}
+        if not isinstance(value, dict):
+            raise ValueError(f"'{key}' must be a dict of {', '.join(keys)} (or False for off)")
+        unknown = set(value) - set(keys)
+        if unknown:
+            raise ValueError(f"'{key}' has no key '{sorted(unknown)[0]}' (known: {', '.join(keys)})")
+        return replace(defaults, **{k: check_value(keys[k], f"{key}.{k}", v) for k, v in value.items()})
     choices = param.type[5:].split("|") if param.type.startswith("word:") else ()
     if value in choices:
         return value
@@ -650,3 +669,26 @@ def check_value(param: Parameter, key: str, value):
     if is_vector:
         return items
     return int(items[0]) if param.type == "int" else items[0]
+
+
+def check_param_values(scene: CheckedScene, values) -> None:
+    """Check every value that depends on params, for these param values;
+    raise SceneError at each value's span that is out of its range."""
+    checker = _Checker(ast.Program((), scene.file, scene.source))
+    for check_ in scene.param_checks:
+        items = check_.value.items if isinstance(check_.value, ir.Vec) else (check_.value,)
+        try:
+            constants = tuple(ir.const(ir.evaluate(x, values)) for x in items)
+        except (ValueError, ZeroDivisionError, OverflowError):
+            checker.error(check_.span, f"'{check_.parameter.name}' of '{check_.owner}' is undefined "
+                                       f"for these param values")
+            continue
+        data = ir.Vec(constants) if isinstance(check_.value, ir.Vec) else constants[0]
+        shown = ", ".join(f"{p.name} = {v:g}" for p, v in zip(scene.params, values))
+        try:
+            checker.check_constraints(check_.span, data, check_.parameter, check_.owner)
+        except _Failed:
+            last = checker.errors.pop()
+            checker.error(check_.span, f"{last.message} (with {shown})")
+    if checker.errors:
+        raise SceneError(checker.errors)

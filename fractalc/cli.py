@@ -33,8 +33,14 @@ def _parse_set(values: list[str]) -> dict[str, float]:
     return params
 
 
+def _require_file(path: str) -> None:
+    if not os.path.isfile(path):
+        raise UsageError(f"cannot read {path}: no such file")
+
+
 def _load(args):
     from .api import load
+    _require_file(args.scene)
     params = _parse_set(getattr(args, "set", None))
     return load(args.scene, params=params, precision=getattr(args, "precision", None),
                 device=getattr(args, "device", None))
@@ -80,6 +86,7 @@ def command_compile(args) -> int:
 def command_check(args) -> int:
     from .check import check
     from .parse import parse
+    _require_file(args.scene)
     try:
         with open(args.scene, "rb") as f:
             text = f.read(8 * 1024 * 1024 + 1).decode("utf-8", errors="replace")

@@ -286,6 +286,7 @@ def features(render, camera, materials) -> dict[str, bool]:
         "REFLECTIONS": render.reflections > 0,
         "DEPTH_OF_FIELD": camera.aperture > 0,
         "TRANSPARENCY": transparent,
+        "OVERRELAX": render.overrelax > 1,
     }
 
 
@@ -300,6 +301,8 @@ def _effect_constants(render, on: dict[str, bool]) -> list[str]:
                   f"#define FOG_DENSITY {literal(render.fog.density)}"]
     if on["DITHER"]:
         lines.append(f"#define DITHER {literal(render.dither)}")
+    if on["OVERRELAX"]:
+        lines.append(f"#define OVERRELAX {literal(render.overrelax)}")
     if on["REFLECTIONS"]:
         lines.append(f"#define REFLECTIONS {render.reflections}")
     return lines

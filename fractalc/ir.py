@@ -218,3 +218,19 @@ def walk(root, children=children):
         stack.append((node, True))
         stack.extend((c, False) for c in reversed(children(node)))
     return order
+
+
+def evaluate(root: Expr, params) -> float:
+    """The value of a point-independent expression for the given param
+    values (indexable by `Param.index`), in float64."""
+    values: dict = {}
+    for node in walk(root):
+        if isinstance(node, Const):
+            values[node] = node.value
+        elif isinstance(node, Param):
+            values[node] = float(params[node.index])
+        elif isinstance(node, Op):
+            values[node] = float(OPS[node.op][1](*(values[a] for a in node.args)))
+        else:
+            raise ValueError(f"{node!r} depends on the point")
+    return values[root]

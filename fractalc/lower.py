@@ -61,10 +61,14 @@ def _rotated(point: Point, axis: ir.Vec, degrees: ir.Expr) -> Point:
 
 
 def _repeated(point: Point, period: ir.Vec) -> Point:
-    """p - c round(p / c) on each axis whose period c is not a literal 0."""
-    return tuple(p if ir.is_const(c) and c.value == 0.0
-                 else ir.sub(p, ir.mul(c, ir.op("round", ir.div(p, c))))
-                 for p, c in zip(point, period.items))
+    """p - c round(p / c) on each axis whose period c is not 0 (a period
+    that is a param may become 0 at render time: then p)."""
+    def axis(p, c):
+        if ir.is_const(c) and c.value == 0.0:
+            return p
+        wrapped = ir.sub(p, ir.mul(c, ir.op("round", ir.div(p, c))))
+        return ir.op("select", ir.op("lt", ir.const(0.0), c), wrapped, p)
+    return tuple(axis(p, c) for p, c in zip(point, period.items))
 
 
 class _Lowerer:
@@ -128,7 +132,9 @@ class _Lowerer:
         if kind == "round":
             return ir.sub(d, args[0]), ids
         if kind == "onion":
-            return ir.sub(ir.op("abs", d), args[0]), ids
+            # a shell of thickness t inside the surface: |d + t/2| - t/2
+            half = ir.mul(args[0], ir.const(0.5))
+            return ir.sub(ir.op("abs", ir.add(d, half)), half), ids
         raise ValueError(f"unknown transform {kind!r}")
 
 

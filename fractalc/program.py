@@ -9,7 +9,7 @@ from typing import Union
 
 from . import ir
 from .errors import Span
-from .stdlib import Signature
+from .stdlib import Parameter, Signature
 
 Vector3 = tuple[float, float, float]
 
@@ -135,6 +135,17 @@ class RenderSettings:
     slice: Slice | None = None
     ao_method: str = "normal"        # normal: sample along the normal; steps: from the step count
     dither: float = 1.0              # random fraction of the first step, against banding
+    overrelax: float = 1.0           # over-relaxation factor of sphere tracing (1 = plain)
+
+
+@dataclass(frozen=True)
+class ParamCheck:
+    """A range check on a value that depends on params, made whenever the
+    params change (LANGUAGE.md: values outside their range are errors)."""
+    span: Span
+    value: object                # ir.Expr or ir.Vec
+    parameter: Parameter
+    owner: str
 
 
 @dataclass(frozen=True)
@@ -147,3 +158,4 @@ class CheckedScene:
     camera: Camera = Camera()
     lights: tuple[Light, ...] = ()           # empty: a headlight
     render: RenderSettings = RenderSettings()
+    param_checks: tuple[ParamCheck, ...] = ()

@@ -202,7 +202,7 @@ TRANSFORMS = {
     "twist": Signature("transform", "twist", (_p("rate", "num"),)),
     "bend": Signature("transform", "bend", (_p("rate", "num"),)),
     "material": Signature("transform", "material", (_p("material", "material"),)),
-    "color": Signature("transform", "color", (_p("rgb", "vec3"),)),
+    "color": Signature("transform", "color", (_p("rgb", "vec3", None, "0..1000"),)),
 }
 
 # math function -> (arity, how arguments combine): "map" applies per

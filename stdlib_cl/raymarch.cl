@@ -63,9 +63,27 @@ march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real 
 #if FEATURE_GLOW
     r.closest = (real)MAX_DISTANCE;
 #endif
+#if FEATURE_OVERRELAX
+    // Over-relaxed sphere tracing (Keinert et al. 2014): steps of
+    // OVERRELAX * d while successive unbounding spheres overlap; when they
+    // do not, the lane steps back and marches plainly from there on.
+    real omega = (real)OVERRELAX;
+    real previous_radius = 0.0f, step = 0.0f;
+#endif
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
         real d = distance_estimate(v3_add(origin, v3_scale(dir, r.t)), params);
         r.steps = r.steps + SELECT((real)0.0f, (real)1.0f, active);
+#if FEATURE_OVERRELAX
+        mask overshot = active & (omega > 1.0f) & (fabs(d) + previous_radius < step);
+        if (ANY(overshot)) {
+            // back to the previous point (its distance was previous_radius),
+            // to step plainly from there
+            r.t = SELECT(r.t, r.t - step, overshot);
+            d = SELECT(d, previous_radius, overshot);
+            omega = SELECT(omega, (real)1.0f, overshot);
+        }
+        previous_radius = fabs(d);
+#endif
 #if FEATURE_GLOW
         r.closest = SELECT(r.closest, min(r.closest, d), active);
 #endif
@@ -76,7 +94,12 @@ march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real 
         if (i == 0)
             d = d * (1.0f - jitter);
 #endif
+#if FEATURE_OVERRELAX
+        step = d * omega;
+        r.t = SELECT(r.t, r.t + step, active);
+#else
         r.t = SELECT(r.t, r.t + d, active);
+#endif
         active = active & (r.t < (real)MAX_DISTANCE);
     }
     return r;
@@ -219,7 +242,7 @@ vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 
 #endif
 
 // Colour seen along one ray: the shaded surface or the background, then
-// transparency, reflections, glow and fog.
+// transparency, reflections, fog and glow.
 vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel_angle,
                  __constant scalar *params) {
     vec3 color = v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);
@@ -228,21 +251,23 @@ vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixe
         real threshold = hit_threshold(m.t, pixel_angle);
         color = v3_select(color, shade(p, normal, dir, threshold, m.steps, m.hit, params), m.hit);
     }
-#if FEATURE_GLOW
-    // Glow: misses are lit by how close they passed to the surface.
-    real glow = SELECT((real)0.0f, GLOW_STRENGTH * exp(-max(m.closest, 0.0f) / GLOW_RADIUS), m.hit == (mask)0);
-    color = v3_add(color, v3_scale(v3(GLOW_R, GLOW_G, GLOW_B), glow));
+#if FEATURE_TRANSPARENCY
+    color = transmitted_color(origin, dir, m, normal, color, pixel_angle, params);
+#endif
+#if FEATURE_REFLECTIONS
+    color = reflected_color(origin, dir, m, normal, color, pixel_angle, params);
 #endif
 #if FEATURE_FOG
     // Exponential fog: a miss is infinitely far and shows the fog colour.
     real clear = SELECT((real)0.0f, exp(-FOG_DENSITY * m.t), m.hit);
     color = v3_add(v3_scale(color, clear), v3_scale(v3(FOG_R, FOG_G, FOG_B), 1.0f - clear));
 #endif
-#if FEATURE_TRANSPARENCY
-    color = transmitted_color(origin, dir, m, normal, color, pixel_angle, params);
-#endif
-#if FEATURE_REFLECTIONS
-    color = reflected_color(origin, dir, m, normal, color, pixel_angle, params);
+#if FEATURE_GLOW
+    // Glow, after fog so that fog does not hide it: misses are lit by how
+    // close they passed to the surface.
+    real glow = SELECT((real)0.0f, GLOW_STRENGTH * exp(-max(m.closest, 0.0f) / GLOW_RADIUS),
+                       m.hit == (mask)0);
+    color = v3_add(color, v3_scale(v3(GLOW_R, GLOW_G, GLOW_B), glow));
 #endif
     return color;
 }
@@ -281,14 +306,15 @@ __kernel void render(__global float *out, __constant scalar *params,
     if (pinhole) {
         color = trace_color(origin, dir, centre, normal, pixel_angle, params);
     } else {
-        // Stratified: a grid x grid array of cells over the pixel, samples
-        // of them taken in order, each jittered within its cell.
-        int grid = (int)ceil(sqrt((float)samples));
+        // Stratified: a columns x rows array of cells covering the pixel,
+        // one jittered sample per cell (square counts fill every cell).
+        int columns = (int)ceil(sqrt((float)samples));
+        int rows = (samples + columns - 1) / columns;
         color = v3((real)0.0f, 0.0f, 0.0f);
         for (int s = 0; s < samples; s++) {
             lane_uint key = hash_lanes(pixel_id * (uint)samples + (uint)s) ^ seed;
-            real jx = ((real)(s % grid) + unit_random(key)) / (scalar)grid;
-            real jy = ((real)(s / grid) + unit_random(key ^ 0x9e3779b9u)) / (scalar)grid;
+            real jx = ((real)(s % columns) + unit_random(key)) / (scalar)columns;
+            real jy = ((real)(s / columns) + unit_random(key ^ 0x9e3779b9u)) / (scalar)rows;
             vec3 sample_origin = origin;
             vec3 sample_dir = pixel_ray(camera, width, height, px + jx, py + jy);
 #if FEATURE_DEPTH_OF_FIELD

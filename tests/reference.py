@@ -139,7 +139,8 @@ def round_(p, s, r):
 
 
 def onion(p, s, t):
-    return np.abs(s(p)) - t
+    """A shell of thickness t inside the surface of s."""
+    return np.abs(s(p) + t / 2) - t / 2
 
 
 def _lipschitz(g):
