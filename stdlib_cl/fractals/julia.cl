@@ -27,19 +27,22 @@ real de_julia(vec3 p, real cx, real cy, real cz, real cw, real slice, int iterat
         if (!ANY(active)) break;
         // q^2 = (x^2 - |v|^2, 2 x v) for q = (x, v).
         real sx = x * x - (y * y + z * z + w * w), sy = 2.0f * x * y, sz = 2.0f * x * z, sw = 2.0f * x * w;
-        mask escapes = r2 > 1e12f;
-        real scale = SELECT((real)1.0f, 1.0f / r2, escapes);
+        real scale = 1.0f;
+        mask escapes = active & (r2 > 1e12f);
+        if (ANY(escapes)) {
+            scale = SELECT(scale, 1.0f / r2, escapes);
+            log_scale = SELECT(log_scale, log(r2), escapes);
+        }
         x = SELECT(x, (sx + cx) * scale, active);
         y = SELECT(y, (sy + cy) * scale, active);
         z = SELECT(z, (sz + cz) * scale, active);
         w = SELECT(w, (sw + cw) * scale, active);
         dr = SELECT(dr, min(2.0f * r * dr, 1e30f) * scale, active);
-        log_scale = SELECT(log_scale, log(r2), active & escapes);
         active = active & !escapes;
     }
     real r = sqrt(x * x + y * y + z * z + w * w);
     real de = 0.5f * (log(r) + log_scale) * r / dr;
-    // DE = 0 at r = 0 or dr = 0; a point too far for |p| to be a float is far away.
+    // DE = 0 at r = 0 or dr = 0; min() keeps it finite where |p| overflows (> 1e19 in float).
     return SELECT(min(de, 1e30f), (real)0.0f, (r == 0.0f) | (dr == 0.0f));
 }
 

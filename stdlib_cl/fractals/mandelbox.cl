@@ -24,7 +24,7 @@ real de_mandelbox(vec3 p, real scale, real min_radius, real fixed_radius, real f
         // it (factor fixed^2 / r^2), linearly inside min_radius (factor
         // fixed^2 / min^2): the factor is fixed^2 / r^2 clamped to
         // [1, fixed^2 / min^2]. (The floor on r^2 keeps 0 / 0 out once k^2
-        // has underflowed; it is below any r^2 that changes the factor.)
+        // has underflowed; it changes nothing while min_radius k > 1e-19.)
         real r2 = max(v3_dot(z, z), (real)FLT_MIN);
         real fold = clamp(fixed2 * (k * k) / r2, 1.0f, fixed2 / min2);
         // Scale and translate.

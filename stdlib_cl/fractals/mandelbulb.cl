@@ -29,23 +29,25 @@ real de_mandelbulb(vec3 p, real power, int iterations, real bailout) {
         vec3 direction = v3(sin(theta) * cos(phi), sin(phi) * sin(theta), cos(theta));
         real r_power1 = pow(r, power - 1.0f);
         real r_power = r_power1 * r;
-        mask escapes = r_power > 1e12f;
         // z = r^power direction + p, dr = power r^(power-1) dr + 1 ...
         vec3 z_next = v3_add(v3_scale(direction, r_power), p);
         real dr_next = min(power * r_power1 * dr + 1.0f, 1e24f);
         // ... or both divided by r^power when that is too large.
-        real log_power = power * log(r);
-        real inverse = exp(-log_power);
-        vec3 z_scaled = v3_add(direction, v3_scale(p, inverse));
-        real dr_scaled = power * dr / r + inverse;
-        z = v3_select(z, v3_select(z_next, z_scaled, escapes), active);
-        dr = SELECT(dr, SELECT(dr_next, dr_scaled, escapes), active);
-        log_scale = SELECT(log_scale, log_power, active & escapes);
+        mask escapes = active & (r_power > 1e12f);
+        if (ANY(escapes)) {
+            real log_power = power * log(r);
+            real inverse = exp(-log_power);
+            z_next = v3_select(z_next, v3_add(direction, v3_scale(p, inverse)), escapes);
+            dr_next = SELECT(dr_next, power * dr / r + inverse, escapes);
+            log_scale = SELECT(log_scale, log_power, escapes);
+        }
+        z = v3_select(z, z_next, active);
+        dr = SELECT(dr, dr_next, active);
         active = active & !escapes;
     }
     real r = v3_length(z);
     real de = 0.5f * (log(r) + log_scale) * r / dr;
-    // DE = 0 at r = 0; a point too far for |p| to be a float is far away.
+    // DE = 0 at r = 0; min() keeps it finite where |p| overflows (> 1e19 in float).
     return SELECT(min(de, 1e30f), (real)0.0f, r == 0.0f);
 }
 
