@@ -13,13 +13,13 @@ from dataclasses import dataclass, replace
 
 from . import ast, ir
 from .errors import Diagnostic, SceneError, Span, diagnostic
-from .program import (DEFAULT_MATERIAL, Camera, CheckedScene, Combination, Fog, Glow, Light,
+from .program import (DEFAULT_MATERIAL, Camera, CheckedScene, Coloring, Combination, Fog, Glow, Light,
                       Material, ParamCheck, ParamInfo, Primitive, RenderSettings, Slice,
                       Transformed, WithMaterial)
-from .stdlib import COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
+from .stdlib import COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
 
 # The language's value types.
-NUM, SHAPE, MATERIAL, WORD = "number", "shape", "material", "word"
+NUM, SHAPE, MATERIAL, WORD, COLORING = "number", "shape", "material", "word", "coloring"
 NOT_YET = {
     "fractal": {"mandelbulb", "julia", "mandelbox", "menger", "sierpinski"},
 }
@@ -38,6 +38,7 @@ class Value:
 _ERROR = Value("error", None)
 
 _TYPE_WORDS = {NUM: "a number", SHAPE: "a shape", MATERIAL: "a material", WORD: "a name",
+               COLORING: "a colouring (orbit_trap)", "color": "a colour (r, g, b) or orbit_trap(...)",
                "vec2": "a 2-vector", "vec3": "a 3-vector", "vec4": "a 4-vector",
                "size": "a number or a 3-vector", "int": "a whole number", "rgb": "a colour (r, g, b)"}
 
@@ -213,7 +214,8 @@ class _Checker:
             return self.let_value(e.name)
         if e.name in self.material_decls:
             return Value(MATERIAL, e.name)
-        if e.name in self.library.signatures or e.name in COMBINATORS or e.name in MATH:
+        if e.name in self.library.signatures or e.name in COMBINATORS or e.name in MATH \
+                or e.name in COLORINGS:
             self.fail(e.span, f"'{e.name}' is a function: call it, e.g. '{e.name}()'")
         return Value(WORD, e.name)
 
@@ -297,7 +299,14 @@ class _Checker:
         if value.type == "error":
             raise _Failed
         want = param.type
-        ok = {"num": (NUM,), "int": (NUM,), "vec3": ("vec3",), "vec4": ("vec4",),
+        if want.startswith("word:"):
+            choices = want[5:].split("|")
+            if value.type == WORD and value.data in choices:
+                return value.data
+            self.fail(span, f"'{param.name}' of '{owner}' must be one of {', '.join(choices)}")
+        if want == "color" and value.type == COLORING:
+            return value.data
+        ok = {"num": (NUM,), "int": (NUM,), "vec3": ("vec3",), "vec4": ("vec4",), "color": ("vec3",),
               "size": (NUM, "vec3"), "material": (MATERIAL,), "shape": (SHAPE,)}[want]
         if value.type not in ok:
             word = _TYPE_WORDS.get(want if want != "num" else NUM)
@@ -372,11 +381,14 @@ class _Checker:
             return self.math(e)
         if name in COMBINATORS:
             return self.combinator(e)
+        if name in COLORINGS:
+            near, far, trap, scale = self.bound_args(e, COLORINGS[name], e.args)
+            return Value(COLORING, Coloring(near, far, trap, scale))
         signature = self.library.signatures.get(name)
         if signature is None:
             if name in NOT_YET["fractal"]:
                 self.fail(e.name_span, f"'{name}' is not supported yet")
-            known = list(self.library.signatures) + list(COMBINATORS) + list(MATH)
+            known = list(self.library.signatures) + list(COMBINATORS) + list(MATH) + list(COLORINGS)
             close = difflib.get_close_matches(name, known, n=1)
             hint = f" (did you mean '{close[0]}'?)" if close else ""
             self.fail(e.name_span, f"unknown function '{name}'{hint}")
@@ -437,6 +449,10 @@ class _Checker:
         args = self.bound_args(e, signature, e.args)
         if e.name == "material":
             return Value(SHAPE, WithMaterial(receiver.data, args[0], e.span))
+        if e.name == "color" and isinstance(args[0], Coloring):
+            coloring = args[0]
+            return Value(SHAPE, WithMaterial(receiver.data, self.color_material(coloring.near), e.span,
+                                             coloring))
         if e.name == "color":
             return Value(SHAPE, WithMaterial(receiver.data, self.color_material(args[0]), e.span))
         return Value(SHAPE, Transformed(e.name, receiver.data, args, e.span))
@@ -554,6 +570,8 @@ class _Checker:
 
 
 def _default(p: Parameter):
+    if isinstance(p.default, str):
+        return p.default
     if isinstance(p.default, tuple):
         return ir.Vec(tuple(ir.const(x) for x in p.default))
     if p.type == "size":

@@ -2,7 +2,7 @@
 
 The source is one self-contained program: scene constants, the prelude, the
 library functions the scene calls (and nothing else), the generated
-`distance_estimate`, `material_id`, `surface_of` and `shade`, and the fixed
+`distance_estimate`, `surface_at` and `shade`, and the fixed
 template with the kernels. `Target.lanes` chooses one ray per work-item (1,
 for GPUs) or one ray per vector lane (8 or 16, for CPUs); `Target.double`
 makes every `real` a double. Output is deterministic: the same scene and
@@ -10,6 +10,7 @@ target give the same text, which is the build cache's key.
 """
 from __future__ import annotations
 
+import dataclasses
 import re
 from dataclasses import dataclass
 
@@ -179,41 +180,17 @@ def _vector(v) -> str:
 
 
 def _surface_function(scene_ir: SceneIR) -> str:
-    """Material properties by id, chosen per lane with selects."""
-    lines = ["typedef struct { vec3 albedo; real specular, shininess, reflectivity, transparency, ior; } surface;",
-             "",
-             "surface surface_of(lane_int id, __constant scalar *params) {"]
-    for index, material in enumerate(scene_ir.materials):
-        albedo = f"v3({', '.join(_uniform(x) for x in material.color.items)})"
-        specular, shininess = _uniform(material.specular), _uniform(material.shininess)
-        reflectivity = _uniform(material.reflectivity)
-        transparency, ior = _uniform(material.transparency), _uniform(material.ior)
-        if index == 0:
-            lines.append(f"    surface s = {{ {albedo}, {specular}, {shininess}, {reflectivity}, "
-                         f"{transparency}, {ior} }};  // {material.name}")
-            continue
-        lines += [f"    {{   // {material.name}",
-                  f"        mask is = id == (lane_int){index};",
-                  f"        s.albedo = v3_select(s.albedo, {albedo}, is);",
-                  f"        s.specular = SELECT(s.specular, {specular}, is);",
-                  f"        s.shininess = SELECT(s.shininess, {shininess}, is);",
-                  f"        s.reflectivity = SELECT(s.reflectivity, {reflectivity}, is);",
-                  f"        s.transparency = SELECT(s.transparency, {transparency}, is);",
-                  f"        s.ior = SELECT(s.ior, {ior}, is);",
-                  "    }"]
-    lines += ["    return s;", "}"]
-    if scene_ir.scene.render.reflections > 0:
-        lines += ["", "real surface_reflectivity(vec3 p, __constant scalar *params) {",
-                  "    return surface_of(material_id(p, params), params).reflectivity;", "}"]
-    return "\n".join(lines)
-
-
-def _uniform(expr: ir.Expr) -> str:
-    """C text of a uniform (point-independent) expression, inlined."""
-    writer = _FunctionWriter(expr)
-    for node in writer.nodes:
-        writer.text[node] = writer.expression(node)
-    return f"(real){writer.text[expr]}"
+    """The surface properties at a point: the nearest part's material."""
+    fields = [f.name for f in dataclasses.fields(scene_ir.surface)]
+    writer = _FunctionWriter(ir.Vec(scene_ir.surface.items()))
+    writer.block(writer.root, "    ")
+    values = ", ".join(writer.argument(x) for x in scene_ir.surface.items())
+    return "\n".join([
+        "typedef struct { real " + ", ".join(fields) + "; } surface;", "",
+        "surface surface_at(vec3 p, __constant scalar *params) {",
+        *writer.lines,
+        f"    surface s = {{ {values} }};",
+        "    return s;", "}"])
 
 
 def _light_block(index: int, light: Light) -> tuple[str, set[str]]:
@@ -238,7 +215,7 @@ def _light_block(index: int, light: Light) -> tuple[str, set[str]]:
         lines.append(f"        radiance = v3_scale(radiance, soft_shadow(lifted, to_light, reach, threshold, "
                      f"{literal(light.softness)}, hit, params));")
         needs.add("soft_shadow")
-    lines += ["        color = v3_add(color, blinn_phong(normal, to_light, to_eye, s.albedo, s.specular, "
+    lines += ["        color = v3_add(color, blinn_phong(normal, to_light, to_eye, albedo, s.specular, "
               "s.shininess, radiance));", "    }"]
     return "\n".join(lines), needs
 
@@ -250,7 +227,8 @@ def _shade_function(scene_ir: SceneIR) -> tuple[str, list[str]]:
     needs = {"blinn_phong"}
     lines = ["vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, real steps, mask hit,",
              "           __constant scalar *params) {",
-             "    surface s = surface_of(material_id(p, params), params);",
+             "    surface s = surface_at(p, params);",
+             "    vec3 albedo = v3(s.red, s.green, s.blue);",
              "    vec3 to_eye = v3(-dir.x, -dir.y, -dir.z);"]
     if ao and scene.render.ao_method == "steps":
         needs.add("step_occlusion")
@@ -260,12 +238,12 @@ def _shade_function(scene_ir: SceneIR) -> tuple[str, list[str]]:
         lines.append(f"    real occlusion = ambient_occlusion(p, normal, {literal(AO_DELTA)}, "
                      f"{literal(scene.render.ao)}, params);")
     ambient = f"{literal(AMBIENT)} * occlusion" if ao else literal(AMBIENT)
-    lines.append(f"    vec3 color = v3_scale(s.albedo, {ambient});")
+    lines.append(f"    vec3 color = v3_scale(albedo, {ambient});")
     if any(light.shadows != "none" for light in scene.lights):
         lines.append("    vec3 lifted = v3_add(p, v3_scale(normal, 2.0f * threshold));")
     if not scene.lights:
         lines += ["    // no lights in the scene: a headlight, from the eye along the ray",
-                  "    color = v3_add(color, blinn_phong(normal, to_eye, to_eye, s.albedo, s.specular, "
+                  "    color = v3_add(color, blinn_phong(normal, to_eye, to_eye, albedo, s.specular, "
                   "s.shininess, v3(1.0f, 1.0f, 1.0f)));"]
     for index, light in enumerate(scene.lights):
         block, light_needs = _light_block(index, light)
@@ -275,10 +253,9 @@ def _shade_function(scene_ir: SceneIR) -> tuple[str, list[str]]:
     return "\n".join(lines), sorted(needs)
 
 
-def features(render, camera, materials) -> dict[str, bool]:
+def features(render, camera, surface) -> dict[str, bool]:
     """The template's optional effects, on where the scene uses them."""
-    transparent = any(not (ir.is_const(m.transparency) and m.transparency.value == 0)
-                      for m in materials)
+    transparent = not (ir.is_const(surface.transparency) and surface.transparency.value == 0)
     return {
         "GLOW": render.glow is not None and render.glow.strength > 0,
         "FOG": render.fog is not None and render.fog.density > 0,
@@ -309,7 +286,7 @@ def _effect_constants(render, on: dict[str, bool]) -> list[str]:
 
 
 def _scene_features(scene_ir: SceneIR) -> dict[str, bool]:
-    return features(scene_ir.scene.render, scene_ir.scene.camera, scene_ir.materials)
+    return features(scene_ir.scene.render, scene_ir.scene.camera, scene_ir.surface)
 
 
 _FEATURE_IF = re.compile(r"^#if FEATURE_(\w+)\s*$")
@@ -389,10 +366,9 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
     scene = scene_ir.scene
     distance = _FunctionWriter(scene_ir.distance).write(
         "real distance_estimate(vec3 p, __constant scalar *params)")
-    material = _FunctionWriter(scene_ir.material_id).write(
-        "lane_int material_id(vec3 p, __constant scalar *params)")
     shade, shading_needs = _shade_function(scene_ir)
-    scene_functions = lib.closure(sorted(set(_calls(scene_ir.distance)) | set(_calls(scene_ir.material_id))))
+    surface_calls = _calls(ir.Vec(scene_ir.surface.items()))
+    scene_functions = lib.closure(sorted(set(_calls(scene_ir.distance)) | set(surface_calls)))
     placed = {f.name for f in scene_functions}
     shading_functions = [f for f in lib.closure(["estimate_normal"] + shading_needs) if f.name not in placed]
 
@@ -405,7 +381,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         lib.prelude,
         _library_text(scene_functions),
         "// ---- the scene " + "-" * 60,
-        distance, material, _surface_function(scene_ir),
+        distance, _surface_function(scene_ir),
         _library_text(shading_functions),
         shade,
         resolve_features(lib.template, _scene_features(scene_ir)),

@@ -1,20 +1,20 @@
 """Stage 3: checked scene -> distance IR (`lower`).
 
-A shape becomes two IR expressions of the point variable `p`: its distance
-estimate and the id of the material nearest to `p`. Point transforms
-(translate, rotate, repeat, scale) are scalar IR arithmetic on the point's
-components; library shapes and warps are `ir.Call`s. Constants fold as the
-IR is built; params stay symbolic.
+A shape becomes IR expressions of the point variable `p`: its distance
+estimate, and the surface (colour and finish) of the part nearest to `p`.
+Point transforms (translate, rotate, repeat, scale) are scalar IR arithmetic
+on the point's components; library shapes and warps are `ir.Call`s.
+Constants fold as the IR is built; params stay symbolic.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 from . import ir
-from .stdlib import library
-from .program import (DEFAULT_MATERIAL, CheckedScene, Combination, Material, Primitive, Shape,
-                      Transformed, WithMaterial)
+from .program import (DEFAULT_MATERIAL, CheckedScene, Coloring, Combination, Material, Primitive,
+                      Shape, Transformed, WithMaterial)
+from .stdlib import TRAP_KINDS, library
 
 POINT = ir.Var("p", ir.VEC3)
 BOUND_MARGIN = 0.1      # evaluate a fractal within 10% of its bound radius of the bound
@@ -23,15 +23,36 @@ Point = tuple[ir.Expr, ir.Expr, ir.Expr]
 
 
 @dataclass(frozen=True)
+class Surface:
+    """The surface properties at a point, each an IR expression."""
+    red: ir.Expr
+    green: ir.Expr
+    blue: ir.Expr
+    specular: ir.Expr
+    shininess: ir.Expr
+    reflectivity: ir.Expr
+    transparency: ir.Expr
+    ior: ir.Expr
+
+    @staticmethod
+    def of(material: Material) -> "Surface":
+        return Surface(*material.color.items, material.specular, material.shininess,
+                       material.reflectivity, material.transparency, material.ior)
+
+    def items(self) -> tuple[ir.Expr, ...]:
+        return tuple(getattr(self, f.name) for f in fields(self))
+
+
+def _chosen(condition: ir.Expr, if_true: Surface, if_false: Surface) -> Surface:
+    """Field-wise select (folded where both sides agree)."""
+    return Surface(*(ir.op("select", condition, a, b) for a, b in zip(if_true.items(), if_false.items())))
+
+
+@dataclass(frozen=True)
 class SceneIR:
     scene: CheckedScene
     distance: ir.Expr            # real, of POINT
-    material_id: ir.Expr         # int, of POINT
-    materials: tuple[Material, ...]   # indexed by material id
-
-
-def _material_ids(scene: CheckedScene) -> dict[str, int]:
-    return {name: i for i, name in enumerate(scene.materials)}
+    surface: Surface             # of POINT
 
 
 def _smooth_or_plain(plain: str, smooth_function: str, a, b, k: ir.Expr) -> ir.Expr:
@@ -73,18 +94,19 @@ def _repeated(point: Point, period: ir.Vec) -> Point:
 
 class _Lowerer:
     def __init__(self, scene: CheckedScene):
-        self.ids = _material_ids(scene)
+        self.materials = scene.materials
         self.library = library()
 
-    def shape(self, s: Shape, point: Point, material: int) -> tuple[ir.Expr, ir.Expr]:
-        """(distance, material id) of shape `s` at `point`."""
+    def shape(self, s: Shape, point: Point, look: tuple[Surface, Coloring | None]):
+        """(distance, surface) of shape `s` at `point`; `look` is the
+        innermost enclosing material (and orbit-trap colouring)."""
         if isinstance(s, Primitive):
-            return self.primitive(s, point), ir.Const(float(material), ir.INT)
+            return self.primitive(s, point), self.primitive_surface(s, point, look)
         if isinstance(s, WithMaterial):
-            return self.shape(s.shape, point, self.ids[s.material])
+            return self.shape(s.shape, point, (Surface.of(self.materials[s.material]), s.coloring))
         if isinstance(s, Combination):
-            return self.combination(s, point, material)
-        return self.transformed(s, point, material)
+            return self.combination(s, point, look)
+        return self.transformed(s, point, look)
 
     def primitive(self, s: Primitive, point: Point) -> ir.Expr:
         distance = ir.call(s.signature.function, (ir.Vec(point),) + s.args)
@@ -97,52 +119,66 @@ class _Lowerer:
         bound = ir.call("sd_sphere", (ir.Vec(point), radius))
         return ir.Bounded(bound, distance, ir.mul(radius, ir.const(BOUND_MARGIN)))
 
-    def combination(self, s: Combination, point: Point, material: int):
-        lowered = [self.shape(child, point, material) for child in s.shapes]
-        distance, ids = lowered[0]
-        for d, i in lowered[1:]:
+    def primitive_surface(self, s: Primitive, point: Point, look) -> Surface:
+        surface, coloring = look
+        trap_function = f"{s.signature.name}_orbit_trap"
+        if coloring is None or trap_function not in self.library.functions:
+            return surface
+        # Orbit-trap colour: mix(near, far, clamp(trap * scale, 0, 1)).
+        kind = ir.Const(float(TRAP_KINDS.index(coloring.trap)), ir.INT)
+        trap = ir.call(trap_function, (ir.Vec(point),) + s.args + (kind,))
+        t = ir.op("clamp", ir.mul(trap, coloring.scale), ir.const(0.0), ir.const(1.0))
+        rgb = tuple(ir.op("mix", a, b, t) for a, b in zip(coloring.near.items, coloring.far.items))
+        items = surface.items()
+        return Surface(*rgb, *items[3:])
+
+    def combination(self, s: Combination, point: Point, look):
+        lowered = [self.shape(child, point, look) for child in s.shapes]
+        distance, surface = lowered[0]
+        for d, other in lowered[1:]:
             if s.kind == "union":
-                ids = ir.op("select", ir.op("lt", d, distance), i, ids)
+                surface = _chosen(ir.op("lt", d, distance), other, surface)
                 distance = _smooth_or_plain("min", "smooth_min", distance, d, s.smooth)
             elif s.kind == "intersect":
-                ids = ir.op("select", ir.op("lt", distance, d), i, ids)
+                surface = _chosen(ir.op("lt", distance, d), other, surface)
                 distance = _smooth_or_plain("max", "smooth_max", distance, d, s.smooth)
-            else:   # subtract: the cut face keeps the first shape's material
+            else:   # subtract: the cut face keeps the first shape's surface
                 distance = _smooth_or_plain("max", "smooth_max", distance, ir.neg(d), s.smooth)
-        return distance, ids
+        return distance, surface
 
-    def transformed(self, s: Transformed, point: Point, material: int):
+    def transformed(self, s: Transformed, point: Point, look):
         kind, args = s.kind, s.args
         if kind == "translate":
-            return self.shape(s.shape, tuple(ir.sub(p, v) for p, v in zip(point, args[0].items)), material)
+            return self.shape(s.shape, tuple(ir.sub(p, v) for p, v in zip(point, args[0].items)), look)
         if kind == "rotate":
-            return self.shape(s.shape, _rotated(point, args[0], args[1]), material)
+            return self.shape(s.shape, _rotated(point, args[0], args[1]), look)
         if kind == "repeat":
-            return self.shape(s.shape, _repeated(point, args[0]), material)
+            return self.shape(s.shape, _repeated(point, args[0]), look)
         if kind == "scale":
             factor = args[0]
-            d, ids = self.shape(s.shape, tuple(ir.div(p, factor) for p in point), material)
-            return ir.mul(d, factor), ids
+            d, surface = self.shape(s.shape, tuple(ir.div(p, factor) for p in point), look)
+            return ir.mul(d, factor), surface
         if kind in ("twist", "bend"):
             rate = args[0]
             warped = ir.call(f"{kind}_point", (ir.Vec(point), rate), ir.VEC3)
-            d, ids = self.shape(s.shape, ir.components(warped), material)
-            return ir.div(d, ir.call(f"{kind}_lipschitz", (ir.Vec(point), rate))), ids
-        d, ids = self.shape(s.shape, point, material)
+            d, surface = self.shape(s.shape, ir.components(warped), look)
+            return ir.div(d, ir.call(f"{kind}_lipschitz", (ir.Vec(point), rate))), surface
+        d, surface = self.shape(s.shape, point, look)
         if kind == "round":
-            return ir.sub(d, args[0]), ids
+            return ir.sub(d, args[0]), surface
         if kind == "onion":
             # a shell of thickness t inside the surface: |d + t/2| - t/2
             half = ir.mul(args[0], ir.const(0.5))
-            return ir.sub(ir.op("abs", ir.add(d, half)), half), ids
+            return ir.sub(ir.op("abs", ir.add(d, half)), half), surface
         raise ValueError(f"unknown transform {kind!r}")
 
 
 def lower(scene: CheckedScene) -> SceneIR:
-    """Lower the scene's shape to distance and material-id expressions."""
+    """Lower the scene's shape to its distance and surface expressions."""
     lowerer = _Lowerer(scene)
     point = ir.components(POINT)
-    distance, material_id = lowerer.shape(scene.shape, point, lowerer.ids[DEFAULT_MATERIAL])
+    default = (Surface.of(scene.materials[DEFAULT_MATERIAL]), None)
+    distance, surface = lowerer.shape(scene.shape, point, default)
     cut = scene.render.slice
     if cut is not None:
         # Slicing (seed 002): intersect with the half-space behind the plane;
@@ -152,4 +188,4 @@ def lower(scene: CheckedScene) -> SceneIR:
         for p, c in zip(point, cut.normal):
             plane = ir.add(plane, ir.mul(p, ir.const(c / length)))
         distance = ir.op("max", distance, plane)
-    return SceneIR(scene, distance, material_id, tuple(scene.materials.values()))
+    return SceneIR(scene, distance, surface)

@@ -51,10 +51,20 @@ class Transformed:
 
 
 @dataclass(frozen=True)
+class Coloring:
+    """`orbit_trap(near, far, trap, scale)`: colour by the orbit trap."""
+    near: ir.Vec
+    far: ir.Vec
+    trap: str                   # one of stdlib.TRAP_KINDS
+    scale: ir.Expr
+
+
+@dataclass(frozen=True)
 class WithMaterial:
     shape: "Shape"
     material: str               # a key of CheckedScene.materials
     span: Span
+    coloring: Coloring | None = None   # fractals inside take their colour from it
 
 
 Shape = Union[Primitive, Combination, Transformed, WithMaterial]

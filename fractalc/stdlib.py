@@ -53,6 +53,7 @@ class Function:
 
 _ANNOTATION = re.compile(r"^//:\s*(\w+)\s+(\w+)\((.*)\)\s*$")
 _DEFINITION = re.compile(r"^[A-Za-z_][\w ]*?\b(\w+)\s*\(")
+_TYPEDEF = re.compile(r"^typedef struct \{.*\} (\w+);$")
 _IDENTIFIER = re.compile(r"\b[A-Za-z_]\w*\b")
 
 
@@ -112,6 +113,12 @@ def _parse_file(path, file_name: str) -> tuple[list[Function], dict[str, Signatu
                 continue
             if line.startswith("//"):
                 pending.append(line)
+                continue
+            typedef = _TYPEDEF.match(line)
+            if typedef:   # a one-line struct type: a unit of its own
+                functions.append(Function(typedef.group(1), "\n".join(pending + [line]),
+                                          "\n".join(header), file_name, ()))
+                pending = []
                 continue
             match = _DEFINITION.match(line)
             if not match:
@@ -202,8 +209,18 @@ TRANSFORMS = {
     "twist": Signature("transform", "twist", (_p("rate", "num"),)),
     "bend": Signature("transform", "bend", (_p("rate", "num"),)),
     "material": Signature("transform", "material", (_p("material", "material"),)),
-    "color": Signature("transform", "color", (_p("rgb", "vec3", None, "0..1000"),)),
+    "color": Signature("transform", "color", (_p("rgb", "color", None, "0..1000"),)),
 }
+
+# `.color(orbit_trap(...))`: a fractal coloured by how near its orbit comes
+# to the origin or the coordinate planes (Syntopia part II), from `near`
+# (trap distance 0) to `far` (trap distance >= 1 / scale).
+COLORINGS = {
+    "orbit_trap": Signature("coloring", "orbit_trap", (
+        _p("near", "vec3", (1.0, 0.85, 0.55), "0..1000"), _p("far", "vec3", (0.15, 0.25, 0.6), "0..1000"),
+        _p("trap", "word:origin|x|y|z|planes", "origin"), _p("scale", "num", 1.0, ">0"))),
+}
+TRAP_KINDS = ("origin", "x", "y", "z", "planes")    # the kind numbers of orbit_trap.cl
 
 # math function -> (arity, how arguments combine): "map" applies per
 # component (numbers broadcast), the others take and give what they say.

@@ -170,7 +170,7 @@ vec3 reflected_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 se
     vec3 seen_now = seen_first;
     vec3 color = v3((real)0.0f, 0.0f, 0.0f);
     for (int bounce = 0; bounce < REFLECTIONS; bounce++) {
-        real reflectivity = SELECT((real)0.0f, surface_reflectivity(p, params), active);
+        real reflectivity = SELECT((real)0.0f, surface_at(p, params).reflectivity, active);
         color = v3_add(color, v3_scale(seen_now, weight * (1.0f - reflectivity)));
         weight = weight * reflectivity;
         active = active & (reflectivity > 0.0f);
@@ -209,7 +209,7 @@ vec3 refracted(vec3 dir, vec3 normal, real eta) {
 vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 seen,
                        scalar pixel_angle, __constant scalar *params) {
     vec3 p = v3_add(origin, v3_scale(dir, m.t));
-    surface s = surface_of(material_id(p, params), params);
+    surface s = surface_at(p, params);
     mask active = m.hit & (s.transparency > 0.0f);
     if (!ANY(active))
         return seen;

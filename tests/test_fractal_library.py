@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 import reference_fractals as ref
-from fractalc.emit import _DOUBLE_LITERAL
-from fractalc.resources import resource_dir
+from fractalc.emit import _DOUBLE_LITERAL, _library_text
 from fractalc.stdlib import library
 
 LANES = (1, 8)
@@ -39,8 +38,9 @@ __kernel void bound(__constant scalar *nums, __constant int *ints, __global scal
 
 @lru_cache(maxsize=None)
 def _program(name, lanes, precision):
-    """The built program of stdlib_cl/fractals/NAME.cl with kernels
-    `evaluate` (the DE at points) and `bound` (the bound radius)."""
+    """The built program of the library functions NAME's DE and bound need
+    (stdlib_cl/fractals/NAME.cl and what it calls), with kernels `evaluate`
+    (the DE at points) and `bound` (the bound radius)."""
     import pyopencl as cl
     from fractalc.build import open_device
     lib = library()
@@ -50,7 +50,7 @@ def _program(name, lanes, precision):
     kernels = _KERNELS.format(function=function, name=name, args="".join(", " + a for a in args),
                               bound_args=", ".join(args))
     source = "\n".join([f"#define LANES {lanes}", f"#define PRECISION_DOUBLE {int(precision == 'double')}",
-                        lib.prelude, (resource_dir("stdlib_cl") / "fractals" / f"{name}.cl").read_text(),
+                        lib.prelude, _library_text(lib.closure([function, f"{name}_bound_radius"])),
                         kernels])
     if precision == "double":
         source = _DOUBLE_LITERAL.sub(r"\1", source)

@@ -13,8 +13,8 @@
 // - dr is capped at 1e30 (only orbits that stay bounded get there, whose
 //   DE is then below 1e-23 either way).
 
-//: fractal julia(c: vec4 = (-0.2, 0.6, 0.2, 0), slice: num = 0, iterations: int = 12 1..1000, bailout: num = 4 >0)
-real de_julia(vec3 p, real cx, real cy, real cz, real cw, real slice, int iterations, real bailout) {
+// The iteration, recording its orbit in `trap`.
+real julia_orbit(vec3 p, real cx, real cy, real cz, real cw, real slice, int iterations, real bailout, orbit_trap *trap) {
     // q = x + y i + z j + w k; c likewise (real part first).
     real x = p.x, y = p.y, z = p.z, w = slice;
     real dr = 1.0f;
@@ -38,12 +38,26 @@ real de_julia(vec3 p, real cx, real cy, real cz, real cw, real slice, int iterat
         z = SELECT(z, (sz + cz) * scale, active);
         w = SELECT(w, (sw + cw) * scale, active);
         dr = SELECT(dr, min(2.0f * r * dr, 1e30f) * scale, active);
+        orbit_trap_add(trap, v3(x, y, z), active & !escapes);
         active = active & !escapes;
     }
     real r = sqrt(x * x + y * y + z * z + w * w);
     real de = 0.5f * (log(r) + log_scale) * r / dr;
     // DE = 0 at r = 0 or dr = 0; min() keeps it finite where |p| overflows (> 1e19 in float).
     return SELECT(min(de, 1e30f), (real)0.0f, (r == 0.0f) | (dr == 0.0f));
+}
+
+//: fractal julia(c: vec4 = (-0.2, 0.6, 0.2, 0), slice: num = 0, iterations: int = 12 1..1000, bailout: num = 4 >0)
+real de_julia(vec3 p, real cx, real cy, real cz, real cw, real slice, int iterations, real bailout) {
+    orbit_trap unused = orbit_trap_start();
+    return julia_orbit(p, cx, cy, cz, cw, slice, iterations, bailout, &unused);
+}
+
+// The orbit trap of the same iteration, for `.color(orbit_trap(...))`.
+real julia_orbit_trap(vec3 p, real cx, real cy, real cz, real cw, real slice, int iterations, real bailout, int kind) {
+    orbit_trap trap = orbit_trap_start();
+    julia_orbit(p, cx, cy, cz, cw, slice, iterations, bailout, &trap);
+    return orbit_trap_value(trap, kind);
 }
 
 // A sphere holding every point where the DE can be <= 0. With

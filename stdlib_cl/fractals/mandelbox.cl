@@ -10,8 +10,8 @@
 // compare with fold_limit k and radius^2 k^2, and the translation adds p k
 // and the derivative k; DE = |z| / dr does not depend on k.
 
-//: fractal mandelbox(scale: num = 2, min_radius: num = 0.5 >0 <=fixed_radius, fixed_radius: num = 1 >0, fold_limit: num = 1 >0, iterations: int = 12 1..1000)
-real de_mandelbox(vec3 p, real scale, real min_radius, real fixed_radius, real fold_limit, int iterations) {
+// The iteration, recording its orbit in `trap`.
+real mandelbox_orbit(vec3 p, real scale, real min_radius, real fixed_radius, real fold_limit, int iterations, orbit_trap *trap) {
     vec3 z = p;
     real dr = 1.0f, k = 1.0f;
     real min2 = min_radius * min_radius, fixed2 = fixed_radius * fixed_radius;
@@ -30,6 +30,7 @@ real de_mandelbox(vec3 p, real scale, real min_radius, real fixed_radius, real f
         // Scale and translate.
         z = v3_add(v3_scale(z, fold * scale), v3_scale(p, k));
         dr = dr * fold * fabs(scale) + k;
+        orbit_trap_add(trap, v3_scale(z, 1.0f / max(k, (real)1e-30f)), MASK_TRUE);
         // Renormalise lanes whose z or dr got large.
         real largest = max(max(fabs(z.x), fabs(z.y)), max(fabs(z.z), dr));
         mask large = largest > 1e6f;
@@ -43,6 +44,19 @@ real de_mandelbox(vec3 p, real scale, real min_radius, real fixed_radius, real f
     // dr > 0; the floor only matters once k has underflowed to 0 inside the
     // set, where z and dr may both underflow and the DE is ~0 either way.
     return v3_length(z) / max(dr, 1e-30f);
+}
+
+//: fractal mandelbox(scale: num = 2, min_radius: num = 0.5 >0 <=fixed_radius, fixed_radius: num = 1 >0, fold_limit: num = 1 >0, iterations: int = 12 1..1000)
+real de_mandelbox(vec3 p, real scale, real min_radius, real fixed_radius, real fold_limit, int iterations) {
+    orbit_trap unused = orbit_trap_start();
+    return mandelbox_orbit(p, scale, min_radius, fixed_radius, fold_limit, iterations, &unused);
+}
+
+// The orbit trap of the same iteration, for `.color(orbit_trap(...))`.
+real mandelbox_orbit_trap(vec3 p, real scale, real min_radius, real fixed_radius, real fold_limit, int iterations, int kind) {
+    orbit_trap trap = orbit_trap_start();
+    mandelbox_orbit(p, scale, min_radius, fixed_radius, fold_limit, iterations, &trap);
+    return orbit_trap_value(trap, kind);
 }
 
 // A sphere holding the set (the points whose orbits do not escape), with

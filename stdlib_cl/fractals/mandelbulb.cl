@@ -13,8 +13,8 @@
 // - dr is capped at 1e24 (only orbits that stay bounded get there, whose
 //   DE is then below 1e-20 either way), so n r^(n-1) dr stays below 1e38.
 
-//: fractal mandelbulb(power: num = 8 1..32, iterations: int = 12 1..1000, bailout: num = 2 >0)
-real de_mandelbulb(vec3 p, real power, int iterations, real bailout) {
+// The iteration, recording its orbit in `trap`.
+real mandelbulb_orbit(vec3 p, real power, int iterations, real bailout, orbit_trap *trap) {
     vec3 z = p;
     real dr = 1.0f;
     real log_scale = 0.0f;
@@ -43,12 +43,26 @@ real de_mandelbulb(vec3 p, real power, int iterations, real bailout) {
         }
         z = v3_select(z, z_next, active);
         dr = SELECT(dr, dr_next, active);
+        orbit_trap_add(trap, z, active & !escapes);
         active = active & !escapes;
     }
     real r = v3_length(z);
     real de = 0.5f * (log(r) + log_scale) * r / dr;
     // DE = 0 at r = 0; min() keeps it finite where |p| overflows (> 1e19 in float).
     return SELECT(min(de, 1e30f), (real)0.0f, r == 0.0f);
+}
+
+//: fractal mandelbulb(power: num = 8 1..32, iterations: int = 12 1..1000, bailout: num = 2 >0)
+real de_mandelbulb(vec3 p, real power, int iterations, real bailout) {
+    orbit_trap unused = orbit_trap_start();
+    return mandelbulb_orbit(p, power, iterations, bailout, &unused);
+}
+
+// The orbit trap of the same iteration, for `.color(orbit_trap(...))`.
+real mandelbulb_orbit_trap(vec3 p, real power, int iterations, real bailout, int kind) {
+    orbit_trap trap = orbit_trap_start();
+    mandelbulb_orbit(p, power, iterations, bailout, &trap);
+    return orbit_trap_value(trap, kind);
 }
 
 // A sphere holding every point where the DE can be <= 0, i.e. where the

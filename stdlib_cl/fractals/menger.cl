@@ -20,8 +20,8 @@ real menger_third(real a) {
     return SELECT(3.0f * a, 3.0f * a - 2.0f, a > 1.0f / 3.0f);
 }
 
-//: fractal menger(level: int = 4 0..10)
-real de_menger(vec3 p, int level) {
+// The iteration, recording its orbit in `trap`.
+real menger_orbit(vec3 p, int level, orbit_trap *trap) {
     // Clamping p to a box holding the sponge only brings it closer to the
     // sponge (so the estimate stays a lower bound) and keeps |p|^2 finite.
     p = v3(clamp(p.x, -1e15f, 1e15f), clamp(p.y, -1e15f, 1e15f), clamp(p.z, -1e15f, 1e15f));
@@ -40,9 +40,23 @@ real de_menger(vec3 p, int level) {
         real bar = sqrt(ou * ou + ov * ov) + min(max(u, v), 0.0f);
         d = max(d, -bar * size);
         a = v3(menger_third(a.x), menger_third(a.y), menger_third(a.z));
+        orbit_trap_add(trap, a, MASK_TRUE);
         size = size * (1.0f / 3.0f);
     }
     return d;
+}
+
+//: fractal menger(level: int = 4 0..10)
+real de_menger(vec3 p, int level) {
+    orbit_trap unused = orbit_trap_start();
+    return menger_orbit(p, level, &unused);
+}
+
+// The orbit trap of the same iteration, for `.color(orbit_trap(...))`.
+real menger_orbit_trap(vec3 p, int level, int kind) {
+    orbit_trap trap = orbit_trap_start();
+    menger_orbit(p, level, &trap);
+    return orbit_trap_value(trap, kind);
 }
 
 // All of the sponge lies in the cube, within sqrt(3) of the origin.

@@ -42,8 +42,8 @@ real sierpinski_tetrahedron(vec3 p) {
     return SELECT(outside, plane, plane <= 0.0f);
 }
 
-//: fractal sierpinski(level: int = 6 0..10)
-real de_sierpinski(vec3 p, int level) {
+// The iteration, recording its orbit in `trap`.
+real sierpinski_orbit(vec3 p, int level, orbit_trap *trap) {
     // Clamping p to a box holding the solid only brings it closer to the
     // solid (so the estimate stays a lower bound) and keeps 2^level |p|
     // squared finite.
@@ -52,9 +52,23 @@ real de_sierpinski(vec3 p, int level) {
     for (int i = 0; i < level; i++) {
         p = sierpinski_fold(p, 1.0f);
         p = v3(2.0f * p.x - 1.0f, 2.0f * p.y - 1.0f, 2.0f * p.z - 1.0f);
+        orbit_trap_add(trap, p, MASK_TRUE);
         size = size * 0.5f;
     }
     return sierpinski_tetrahedron(p) * size;
+}
+
+//: fractal sierpinski(level: int = 6 0..10)
+real de_sierpinski(vec3 p, int level) {
+    orbit_trap unused = orbit_trap_start();
+    return sierpinski_orbit(p, level, &unused);
+}
+
+// The orbit trap of the same iteration, for `.color(orbit_trap(...))`.
+real sierpinski_orbit_trap(vec3 p, int level, int kind) {
+    orbit_trap trap = orbit_trap_start();
+    sierpinski_orbit(p, level, &trap);
+    return orbit_trap_value(trap, kind);
 }
 
 // All of T, so all of the solid, lies within |ai| = sqrt(3) of the origin.
