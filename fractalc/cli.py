@@ -12,6 +12,7 @@ import sys
 import time
 
 from .errors import RenderError, SceneError
+from .write import publish
 
 IMAGE_EXTENSIONS = (".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff")
 
@@ -53,7 +54,7 @@ def _write_text_atomically(path: str, text: str) -> None:
     try:
         with os.fdopen(handle, "w") as f:
             f.write(text)
-        os.replace(temporary, path)
+        publish(temporary, path)
     finally:
         if os.path.exists(temporary):
             os.unlink(temporary)

@@ -29,6 +29,15 @@ def _pixels(planes: dict[str, np.ndarray], exr: bool) -> np.ndarray:
     return np.round(rgba * 255.0).astype(np.uint8)
 
 
+def publish(temporary: str, path: str) -> None:
+    """Give a finished temporary file the permissions a new file gets
+    (mkstemp makes it private) and move it into place atomically."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(temporary, 0o666 & ~umask)
+    os.replace(temporary, path)
+
+
 def write(path: str, planes: dict[str, np.ndarray], metadata: dict[str, str]) -> None:
     """Write the render's planes to `path` (format from its extension)."""
     import OpenImageIO as oiio
@@ -56,7 +65,7 @@ def write(path: str, planes: dict[str, np.ndarray], metadata: dict[str, str]) ->
         output.close()
         if not ok:
             raise RenderError(f"cannot write {path}: {output.geterror()}")
-        os.replace(temporary, path)
+        publish(temporary, path)
     finally:
         if os.path.exists(temporary):
             os.unlink(temporary)
