@@ -315,11 +315,22 @@ def resolve_features(text: str, enabled: dict[str, bool]) -> str:
     return "\n".join(out)
 
 
+def lane_block(lanes: int) -> tuple[int, int]:
+    """The pixel block (columns, rows) one work-item renders: as square as
+    the lane count allows (16: 4 x 4, 8: 4 x 2)."""
+    rows = 1
+    while rows * rows * 4 <= lanes:
+        rows *= 2
+    return lanes // rows, rows
+
+
 def _constants(scene_ir: SceneIR, target: Target) -> str:
     render = scene_ir.scene.render
     lanes = target.lanes
-    lane_index = "0.0f" if lanes == 1 else \
-        f"((real)({', '.join(literal(i) for i in range(lanes))}))"
+    width, height = lane_block(lanes)
+
+    def lane_vector(values):
+        return "0.0f" if lanes == 1 else f"((real)({', '.join(literal(v) for v in values)}))"
     pixel = render.epsilon == "pixel"
     return "\n".join([
         f"#define LANES {lanes}",
@@ -329,7 +340,10 @@ def _constants(scene_ir: SceneIR, target: Target) -> str:
         f"#define HIT_EPSILON_IS_PIXEL {int(pixel)}",
         f"#define HIT_EPSILON {literal(0.0 if pixel else render.epsilon)}",
         *(f"#define BACKGROUND_{c} {literal(v)}" for c, v in zip("RGB", render.background)),
-        f"#define LANE_INDEX {lane_index}",
+        f"#define LANES_X {width}",
+        f"#define LANES_Y {height}",
+        f"#define LANE_X {lane_vector([i % width for i in range(lanes)])}",
+        f"#define LANE_Y {lane_vector([i // width for i in range(lanes)])}",
         *_effect_constants(render, _scene_features(scene_ir)),
     ])
 
@@ -343,10 +357,14 @@ _HEADER = """\
 //          int width, int height, int x0, int y0, int pitch, int tile_height,
 //          int samples, uint seed)
 //     Renders the tile of tile_height rows starting at pixel (x0, y0) of a
-//     width x height image. Global size: (pitch / LANES, tile_height), where
-//     pitch is the tile width rounded up to a multiple of LANES. `out` gets 9
-//     planes of pitch * tile_height floats: R G B A Z N.x N.y N.z steps
-//     (linear colour; Z = +inf where the ray missed).
+//     width x height image. A work-item renders a block of LANES_X x LANES_Y
+//     pixels ({block}); global size (pitch / LANES_X, tile_height / LANES_Y),
+//     where pitch and tile_height are the tile's width and height rounded up
+//     to multiples of LANES_X and LANES_Y. `out` gets 9 planes of
+//     pitch * tile_height floats: R G B A Z N.x N.y N.z steps (linear
+//     colour; Z = +inf where the ray missed), each stored block by block:
+//     block (bx, by) at (by * pitch / LANES_X + bx) * LANES, its pixels
+//     row-major within it.
 //     camera: 15 values: position xyz, forward xyz, right xyz, up xyz (the
 //     orthonormal frame of LANGUAGE.md's camera model), tan(fov / 2), lens
 //     aperture (diameter) and focus distance (the last two are read only by
@@ -375,7 +393,8 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
     params = ", ".join(f"[{p.index}] {p.name} (default {p.default:g})" for p in scene.params) or "none"
     scalar = "double" if target.double else "float"
     parts = [
-        _HEADER.format(version=__version__, file=scene.file, real=scalar if target.lanes == 1
+        _HEADER.format(version=__version__, file=scene.file, block="{} x {}".format(*lane_block(target.lanes)),
+                       real=scalar if target.lanes == 1
                        else f"{scalar}{target.lanes}", lanes=target.lanes, scalar=scalar, params=params),
         _constants(scene_ir, target),
         lib.prelude,

@@ -14,6 +14,7 @@ from typing import Callable
 import numpy as np
 
 from .build import Device
+from .emit import lane_block
 from .errors import RenderError
 from .program import Camera
 
@@ -84,28 +85,36 @@ def render(program, device: Device, frame: Frame, params, lanes: int, double: bo
     width, height = frame.width, frame.height
     planes = {name: np.empty((height, width), dtype=np.float32) for name in PLANES}
     kernel = cl.Kernel(program, "render")
+    block_width, block_height = lane_block(lanes)
     with _guard("rendering"):
         params_buffer = _constant_buffer(device, params, double)
         camera_buffer = _constant_buffer(device, frame.camera, double)
-        tile_pitch = math.ceil(min(TILE_WIDTH, width) / lanes) * lanes
-        tile_rows = min(TILE_HEIGHT, height)
-        host = np.empty((len(PLANES), tile_rows, tile_pitch), dtype=np.float32)
-        out = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY, host.nbytes)
+        tile_pitch = _round_up(min(TILE_WIDTH, width), block_width)
+        tile_rows = _round_up(min(TILE_HEIGHT, height), block_height)
+        out = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY, len(PLANES) * tile_rows * tile_pitch * 4)
         for y0 in range(0, height, tile_rows):
             rows = min(tile_rows, height - y0)
+            padded_rows = _round_up(rows, block_height)
             for x0 in range(0, width, tile_pitch):
                 columns = min(tile_pitch, width - x0)
-                pitch = math.ceil(columns / lanes) * lanes
-                kernel(device.queue, (pitch // lanes, rows), None, out, params_buffer, camera_buffer,
-                       np.int32(width), np.int32(height), np.int32(x0), np.int32(y0),
-                       np.int32(pitch), np.int32(rows), np.int32(frame.samples), np.uint32(frame.seed))
-                tile = host.reshape(-1)[:len(PLANES) * pitch * rows].reshape(len(PLANES), rows, pitch)
-                cl.enqueue_copy(device.queue, tile, out)
+                pitch = _round_up(columns, block_width)
+                kernel(device.queue, (pitch // block_width, padded_rows // block_height), None, out,
+                       params_buffer, camera_buffer, np.int32(width), np.int32(height), np.int32(x0),
+                       np.int32(y0), np.int32(pitch), np.int32(padded_rows), np.int32(frame.samples),
+                       np.uint32(frame.seed))
+                blocks = np.empty((len(PLANES), padded_rows // block_height, pitch // block_width,
+                                   block_height, block_width), dtype=np.float32)
+                cl.enqueue_copy(device.queue, blocks, out)
+                tile = blocks.transpose(0, 1, 3, 2, 4).reshape(len(PLANES), padded_rows, pitch)
                 for plane, name in zip(tile, PLANES):
-                    planes[name][y0:y0 + rows, x0:x0 + columns] = plane[:, :columns]
+                    planes[name][y0:y0 + rows, x0:x0 + columns] = plane[:rows, :columns]
                 if progress:
                     progress(rows * columns)
     return planes
+
+
+def _round_up(n: int, multiple: int) -> int:
+    return -(-n // multiple) * multiple
 
 
 def distances(program, device: Device, points: np.ndarray, params, lanes: int, double: bool) -> np.ndarray:

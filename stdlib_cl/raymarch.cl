@@ -272,16 +272,19 @@ vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixe
     return color;
 }
 
-// Renders one tile. Work-item (gx, gy) covers LANES pixels of one row.
-// `out`: PLANE_COUNT planes of pitch * tile_height floats (R G B A Z N.x N.y
-// N.z steps); pitch is the tile width rounded up to a multiple of LANES.
+// Renders one tile. Work-item (gx, gy) covers a block of LANES_X x LANES_Y
+// pixels (compact blocks keep a work-item's rays alike, so its lanes
+// diverge less than a row of LANES would). `out`: PLANE_COUNT planes of
+// pitch * tile_height floats (R G B A Z N.x N.y N.z steps), each stored
+// block by block: block (gx, gy) at (gy * pitch / LANES_X + gx) * LANES,
+// its pixels row-major within it. pitch and tile_height are the tile's size
+// rounded up to multiples of LANES_X and LANES_Y.
 __kernel void render(__global float *out, __constant scalar *params,
                      __constant scalar *camera, int width, int height,
                      int x0, int y0, int pitch, int tile_height, int samples, uint seed) {
     int gx = get_global_id(0), gy = get_global_id(1);
-    int column = gx * LANES;
-    real px = (real)(x0 + column) + LANE_INDEX;
-    real py = (real)(y0 + gy);
+    real px = (real)(x0 + gx * LANES_X) + LANE_X;
+    real py = (real)(y0 + gy * LANES_Y) + LANE_Y;
     mask inside = (px < (real)width) & (py < (real)height);
     scalar pixel_angle = 2.0f * camera[CAMERA_TAN_HALF_FOV] / (scalar)height;
     vec3 origin = v3(camera[CAMERA_POSITION], camera[CAMERA_POSITION + 1], camera[CAMERA_POSITION + 2]);
@@ -328,7 +331,7 @@ __kernel void render(__global float *out, __constant scalar *params,
         color = v3_scale(color, (real)(1.0f / (scalar)samples));
     }
 
-    __global float *pixel = out + gy * pitch + column;
+    __global float *pixel = out + (gy * (pitch / LANES_X) + gx) * LANES;
     int plane = pitch * tile_height;
     real depth = SELECT((real)INFINITY, centre.t, centre.hit);
     STORE_LANES(TO_FLOAT(color.x), 0, pixel + PLANE_R * plane);

@@ -511,6 +511,8 @@ STANDALONE_RUNNER = textwrap.dedent("""\
     source = open(source_path).read()
     header = source[:source.index("#define")]
     lanes = int(re.search(r"LANES = (\\d+)", header).group(1))
+    block_x = int(re.search(r"#define LANES_X (\\d+)", source).group(1))
+    block_y = int(re.search(r"#define LANES_Y (\\d+)", source).group(1))
     scalar = np.float64 if "__constant double *params" in header else np.float32
 
     position = np.array(spec["position"], dtype=np.float64)
@@ -530,19 +532,22 @@ STANDALONE_RUNNER = textwrap.dedent("""\
     queue = cl.CommandQueue(context)
     program = cl.Program(context, source).build()
     width, height = spec["width"], spec["height"]
-    pitch = -(-width // lanes) * lanes
-    out = np.empty((9, height, pitch), dtype=np.float32)
+    pitch = -(-width // block_x) * block_x
+    rows = -(-height // block_y) * block_y
+    out = np.empty((9, rows // block_y, pitch // block_x, block_y, block_x), dtype=np.float32)
     mf = cl.mem_flags
     out_buffer = cl.Buffer(context, mf.WRITE_ONLY, out.nbytes)
     params_buffer = cl.Buffer(context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=params)
     camera_buffer = cl.Buffer(context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=camera)
-    program.render(queue, (pitch // lanes, height), None, out_buffer, params_buffer, camera_buffer,
-                   np.int32(width), np.int32(height), np.int32(0), np.int32(0), np.int32(pitch),
-                   np.int32(height), np.int32(1), np.uint32(0))
+    program.render(queue, (pitch // block_x, rows // block_y), None, out_buffer, params_buffer,
+                   camera_buffer, np.int32(width), np.int32(height), np.int32(0), np.int32(0),
+                   np.int32(pitch), np.int32(rows), np.int32(1), np.uint32(0))
     cl.enqueue_copy(queue, out, out_buffer)
     queue.finish()
     assert "fractalc" not in sys.modules
-    np.save(out_path, out[:, :, :width])
+    # planes are stored block by block: back to rows of pixels
+    image = out.transpose(0, 1, 3, 2, 4).reshape(9, rows, pitch)
+    np.save(out_path, image[:, :height, :width])
     """)
 
 
