@@ -193,7 +193,18 @@ def _surface_function(scene_ir: SceneIR) -> str:
         "    return s;", "}"])
 
 
-def _light_block(index: int, light: Light) -> tuple[str, set[str]]:
+def _bound_function(scene_ir: SceneIR) -> str:
+    """`scene_bound`: the radius and (through `centre`) the centre of a
+    sphere holding the whole scene; uniform, so computed from params only."""
+    centre, radius = scene_ir.bound
+    writer = _FunctionWriter(ir.Vec(tuple(centre) + (radius,)))
+    writer.block(writer.root, "    ")
+    x, y, z, r = (writer.argument(e) for e in tuple(centre) + (radius,))
+    return "\n".join(["real scene_bound(__constant scalar *params, vec3 *centre) {", *writer.lines,
+                      f"    *centre = v3({x}, {y}, {z});", f"    return {r};", "}"])
+
+
+def _light_block(index: int, light: Light, bounded: bool) -> tuple[str, set[str]]:
     radiance = _vector(tuple(c * light.intensity for c in light.color))
     lines = [f"    {{   // light {index}: {light.kind}, shadows {light.shadows}"]
     if light.kind == "directional":
@@ -208,6 +219,11 @@ def _light_block(index: int, light: Light) -> tuple[str, set[str]]:
                   "        vec3 to_light = v3_scale(offset, 1.0f / reach);",
                   f"        vec3 radiance = v3_scale({radiance}, 1.0f / (reach * reach));"]
     needs = set()
+    if bounded and light.shadows != "none":
+        # past the scene's bounding sphere nothing can block the light
+        lines += ["        real enter, leave;",
+                  "        reach = SELECT(reach, fmin(reach, leave), "
+                  "ray_sphere_span(lifted, to_light, bound_centre, bound_radius, &enter, &leave));"]
     if light.shadows == "hard":
         lines.append("        radiance = v3_scale(radiance, hard_shadow(lifted, to_light, reach, threshold, hit, params));")
         needs.add("hard_shadow")
@@ -241,29 +257,34 @@ def _shade_function(scene_ir: SceneIR) -> tuple[str, list[str]]:
     lines.append(f"    vec3 color = v3_scale(albedo, {ambient});")
     if any(light.shadows != "none" for light in scene.lights):
         lines.append("    vec3 lifted = v3_add(p, v3_scale(normal, 2.0f * threshold));")
+        if scene_ir.bound is not None:
+            lines += ["    vec3 bound_centre;", "    real bound_radius = scene_bound(params, &bound_centre);"]
     if not scene.lights:
         lines += ["    // no lights in the scene: a headlight, from the eye along the ray",
                   "    color = v3_add(color, blinn_phong(normal, to_eye, to_eye, albedo, s.specular, "
                   "s.shininess, v3(1.0f, 1.0f, 1.0f)));"]
     for index, light in enumerate(scene.lights):
-        block, light_needs = _light_block(index, light)
+        block, light_needs = _light_block(index, light, scene_ir.bound is not None)
         lines.append(block)
         needs |= light_needs
     lines += ["    return color;", "}"]
     return "\n".join(lines), sorted(needs)
 
 
-def features(render, camera, surface) -> dict[str, bool]:
+def features(render, camera, surface, bounded: bool) -> dict[str, bool]:
     """The template's optional effects, on where the scene uses them."""
     transparent = not (ir.is_const(surface.transparency) and surface.transparency.value == 0)
+    glow = render.glow is not None and render.glow.strength > 0
     return {
-        "GLOW": render.glow is not None and render.glow.strength > 0,
+        "GLOW": glow,
         "FOG": render.fog is not None and render.fog.density > 0,
         "DITHER": render.dither > 0,
         "REFLECTIONS": render.reflections > 0,
         "DEPTH_OF_FIELD": camera.aperture > 0,
         "TRANSPARENCY": transparent,
         "OVERRELAX": render.overrelax > 1,
+        # glow needs every miss's closest approach, so misses must be marched
+        "SCENE_BOUND": bounded and not glow,
     }
 
 
@@ -286,7 +307,8 @@ def _effect_constants(render, on: dict[str, bool]) -> list[str]:
 
 
 def _scene_features(scene_ir: SceneIR) -> dict[str, bool]:
-    return features(scene_ir.scene.render, scene_ir.scene.camera, scene_ir.surface)
+    return features(scene_ir.scene.render, scene_ir.scene.camera, scene_ir.surface,
+                    scene_ir.bound is not None)
 
 
 _FEATURE_IF = re.compile(r"^#if FEATURE_(\w+)\s*$")
@@ -385,8 +407,13 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
     distance = _FunctionWriter(scene_ir.distance).write(
         "real distance_estimate(vec3 p, __constant scalar *params)")
     shade, shading_needs = _shade_function(scene_ir)
-    surface_calls = _calls(ir.Vec(scene_ir.surface.items()))
-    scene_functions = lib.closure(sorted(set(_calls(scene_ir.distance)) | set(surface_calls)))
+    bound = _bound_function(scene_ir) if scene_ir.bound is not None else ""
+    if bound:
+        shading_needs = shading_needs + ["ray_sphere_span"]
+    roots = [scene_ir.distance, ir.Vec(scene_ir.surface.items())]
+    if scene_ir.bound is not None:
+        roots.append(ir.Vec(tuple(scene_ir.bound[0]) + (scene_ir.bound[1],)))
+    scene_functions = lib.closure(sorted({name for root in roots for name in _calls(root)}))
     placed = {f.name for f in scene_functions}
     shading_functions = [f for f in lib.closure(["estimate_normal"] + shading_needs) if f.name not in placed]
 
@@ -400,7 +427,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         lib.prelude,
         _library_text(scene_functions),
         "// ---- the scene " + "-" * 60,
-        distance, _surface_function(scene_ir),
+        distance, _surface_function(scene_ir), bound,
         _library_text(shading_functions),
         shade,
         resolve_features(lib.template, _scene_features(scene_ir)),

@@ -53,6 +53,7 @@ class SceneIR:
     scene: CheckedScene
     distance: ir.Expr            # real, of POINT
     surface: Surface             # of POINT
+    bound: Sphere | None = None  # a sphere holding the whole scene (uniform)
 
 
 def _smooth_or_plain(plain: str, smooth_function: str, a, b, k: ir.Expr) -> ir.Expr:
@@ -111,7 +112,7 @@ class _Lowerer:
     def primitive(self, s: Primitive, point: Point) -> ir.Expr:
         distance = ir.call(s.signature.function, (ir.Vec(point),) + s.args)
         bound_radius = f"{s.signature.name}_bound_radius"
-        if bound_radius not in self.library.functions:
+        if s.signature.kind != "fractal" or bound_radius not in self.library.functions:
             return distance
         # A fractal: far from its bounding sphere, the sphere's distance is
         # a safe step and the fractal is not evaluated (Hart et al. 1989).
@@ -173,6 +174,56 @@ class _Lowerer:
         raise ValueError(f"unknown transform {kind!r}")
 
 
+Sphere = tuple[Point, ir.Expr]      # centre and radius
+
+
+class _Bounds:
+    """A sphere holding a whole shape, or None where it is unbounded (a
+    plane, repetition, a warp); unions take a sphere around both."""
+
+    def __init__(self):
+        self.library = library()
+
+    def of(self, s: Shape) -> Sphere | None:
+        if isinstance(s, Primitive):
+            function = f"{s.signature.name}_bound_radius"
+            if function not in self.library.functions:
+                return None
+            return (ir.const(0.0),) * 3, ir.call(function, s.args)
+        if isinstance(s, WithMaterial):
+            return self.of(s.shape)
+        if isinstance(s, Combination):
+            spheres = [self.of(child) for child in s.shapes]
+            if s.kind != "union":        # intersect and subtract only shrink the first shape
+                return spheres[0] if spheres[0] is not None else next((b for b in spheres if b), None)
+            if any(b is None for b in spheres):
+                return None
+            centre, radius = spheres[0]
+            for other_centre, other_radius in spheres[1:]:
+                gap = ir.op("sqrt", _dot(*(ir.sub(a, b) for a, b in zip(other_centre, centre))))
+                radius = ir.op("max", radius, ir.add(gap, other_radius))
+            # a smooth union bulges by at most k / 4 beyond both shapes
+            return centre, ir.add(radius, ir.mul(s.smooth, ir.const(0.25)))
+        inner = self.of(s.shape)
+        if inner is None or s.kind in ("repeat", "twist", "bend"):
+            return None
+        centre, radius = inner
+        args = s.args
+        if s.kind == "translate":
+            return tuple(ir.add(c, v) for c, v in zip(centre, args[0].items)), radius
+        if s.kind == "rotate":
+            return _rotated(centre, args[0], ir.neg(args[1])), radius
+        if s.kind == "scale":
+            return tuple(ir.mul(c, args[0]) for c in centre), ir.mul(radius, args[0])
+        if s.kind == "round":
+            return centre, ir.add(radius, args[0])
+        return centre, radius    # onion: inside the shape
+
+
+def _dot(x, y, z) -> ir.Expr:
+    return ir.add(ir.add(ir.mul(x, x), ir.mul(y, y)), ir.mul(z, z))
+
+
 def lower(scene: CheckedScene) -> SceneIR:
     """Lower the scene's shape to its distance and surface expressions."""
     lowerer = _Lowerer(scene)
@@ -188,4 +239,4 @@ def lower(scene: CheckedScene) -> SceneIR:
         for p, c in zip(point, cut.normal):
             plane = ir.add(plane, ir.mul(p, ir.const(c / length)))
         distance = ir.op("max", distance, plane)
-    return SceneIR(scene, distance, surface)
+    return SceneIR(scene, distance, surface, _Bounds().of(scene.shape))

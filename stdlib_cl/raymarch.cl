@@ -3,8 +3,10 @@
 //   real distance_estimate(vec3 p, __constant scalar *params);
 //   vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, real steps, mask hit,
 //              __constant scalar *params);
-//   MAX_STEPS, MAX_DISTANCE, HIT_EPSILON (0 = pixel footprint), BACKGROUND, LANE_INDEX,
-//   and the constants of the effects the scene uses.
+//   real scene_bound(__constant scalar *params, vec3 *centre);  (a bounded scene)
+//   MAX_STEPS, MAX_DISTANCE, HIT_EPSILON (0 = pixel footprint), BACKGROUND,
+//   LANES_X, LANES_Y, LANE_X, LANE_Y, and the constants of the effects the
+//   scene uses.
 // `#if FEATURE_...` blocks are resolved by the emitter: a scene's kernel holds
 // only the effects it uses (the directives themselves are gone from it).
 
@@ -70,6 +72,17 @@ march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real 
     real omega = (real)OVERRELAX;
     real previous_radius = 0.0f, step = 0.0f;
 #endif
+#if FEATURE_SCENE_BOUND
+    // Rays start where they enter the scene's bounding sphere and miss once
+    // they leave it: the empty space around the scene costs no evaluation.
+    real t_exit;
+    vec3 centre;
+    real radius = scene_bound(params, &centre);
+    // widened by the hit threshold at its far side: rays that pass within
+    // the threshold of the scene hit it, bound or not
+    radius = radius + hit_threshold(v3_length(v3_sub(origin, centre)) + radius, pixel_angle);
+    active = active & ray_sphere_span(origin, dir, centre, radius, &r.t, &t_exit);
+#endif
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
         real d = distance_estimate(v3_add(origin, v3_scale(dir, r.t)), params);
         r.steps = r.steps + SELECT((real)0.0f, (real)1.0f, active);
@@ -101,6 +114,9 @@ march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real 
         r.t = SELECT(r.t, r.t + d, active);
 #endif
         active = active & (r.t < (real)MAX_DISTANCE);
+#if FEATURE_SCENE_BOUND
+        active = active & (r.t <= t_exit);
+#endif
     }
     return r;
 }

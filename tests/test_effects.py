@@ -294,9 +294,14 @@ def test_glow_lights_misses_by_their_closest_approach():
     assert np.all(seen <= truth * 1.10 + 1e-3)
     # near misses are brighter than far ones
     assert red[miss & (closest < 0.1)].min() > red[miss & (closest > 1.0)].max() + 0.4
-    # hits are not touched
+    # hits are not touched (where the march ended at the same point: without
+    # glow, rays start at the scene's bounding sphere, so at grazing angles
+    # they may stop elsewhere within the hit threshold)
     hit = ~miss
-    assert np.allclose(image.rgba[hit], plain.rgba[hit], atol=1e-6)
+    assert np.array_equal(hit, np.isfinite(plain.depth))
+    same = hit & (image.depth == plain.depth)
+    assert same.sum() > 0.8 * hit.sum()
+    assert np.allclose(image.rgba[same], plain.rgba[same], atol=1e-6)
 
 
 def test_glow_absent_or_zero_leaves_the_background():
@@ -664,7 +669,10 @@ def test_hit_threshold_bounds_the_depth_error(epsilon):
     mean_errors = []
     for distance in (3.0, 12.0):
         camera = Camera((0, -distance, 0), (0, 0, 0), fov=40)
-        image = render(f"scene sphere(1)\n{camera.text()}\nrender {{ epsilon: {epsilon}, max_steps: 1000 }}")
+        # a second, hidden sphere far behind makes the scene's bounding
+        # sphere much larger than the sphere: rays are really marched to it
+        scene_text = "scene sphere(1) | sphere(0.1).translate((0, 40, 0))"
+        image = render(f"{scene_text}\n{camera.text()}\nrender {{ epsilon: {epsilon}, max_steps: 1000 }}")
         dirs = camera.rays()
         truth = ray_sphere(camera.position, dirs, (0, 0, 0), 1.0)
         both = np.isfinite(truth) & np.isfinite(image.depth)

@@ -229,7 +229,10 @@ def check_planes_sane(image, max_steps):
     assert image.rgba.min() >= 0 and image.rgba[..., :3].max() < 20
     alpha = image.rgba[..., 3]
     assert np.all((alpha >= 0) & (alpha <= 1)) and np.all(alpha[hit] == 1)
-    assert image.steps.min() >= 1 and image.steps.max() <= max_steps
+    # a hit takes at least one step; a ray that misses the scene's bounding
+    # sphere takes none
+    assert image.steps[hit].min(initial=1) >= 1 and image.steps.min() >= 0
+    assert image.steps.max() <= max_steps
     assert np.all(image.steps == np.round(image.steps))
     lengths = np.linalg.norm(image.normal[hit], axis=-1)
     assert np.all(np.abs(lengths - 1) < 1e-3), "hit normals are unit vectors"

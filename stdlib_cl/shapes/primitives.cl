@@ -40,3 +40,25 @@ real sd_capsule(vec3 p, vec3 a, vec3 b, real radius) {
     real h = clamp(v3_dot(pa, ba) / max(length2, (real)1e-30f), 0.0f, 1.0f);
     return v3_length(v3_sub(pa, v3_scale(ba, h))) - radius;
 }
+
+// Radii of spheres about the origin holding each finite shape, for the
+// scene's bounding sphere (rays that miss it are not marched).
+real sphere_bound_radius(real radius) {
+    return radius;
+}
+
+real box_bound_radius(vec3 size) {
+    return 0.5f * v3_length(size);
+}
+
+real torus_bound_radius(real major, real minor) {
+    return major + minor;
+}
+
+real cylinder_bound_radius(real radius, real height) {
+    return sqrt(radius * radius + 0.25f * height * height);
+}
+
+real capsule_bound_radius(vec3 a, vec3 b, real radius) {
+    return max(v3_length(a), v3_length(b)) + radius;
+}
