@@ -294,14 +294,13 @@ def test_glow_lights_misses_by_their_closest_approach():
     assert np.all(seen <= truth * 1.10 + 1e-3)
     # near misses are brighter than far ones
     assert red[miss & (closest < 0.1)].min() > red[miss & (closest > 1.0)].max() + 0.4
-    # hits are not touched (where the march ended at the same point: without
-    # glow, rays start at the scene's bounding sphere, so at grazing angles
-    # they may stop elsewhere within the hit threshold)
+    # hits are not touched: the same as with a glow too faint to see (a scene
+    # without glow starts its rays at the scene's bounding sphere, so its
+    # hits end elsewhere within the hit threshold)
+    faint = render(_glow_scene(", glow: { color: (1, 0.5, 0.25), strength: 1e-12, radius: 0.3 }"))
     hit = ~miss
     assert np.array_equal(hit, np.isfinite(plain.depth))
-    same = hit & (image.depth == plain.depth)
-    assert same.sum() > 0.8 * hit.sum()
-    assert np.allclose(image.rgba[same], plain.rgba[same], atol=1e-6)
+    assert np.allclose(image.rgba[hit], faint.rgba[hit], atol=1e-6)
 
 
 def test_glow_absent_or_zero_leaves_the_background():
