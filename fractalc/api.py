@@ -65,8 +65,10 @@ class Scene:
     # ---- params ------------------------------------------------------------
 
     def set_params(self, values: dict) -> None:
-        """Change param values (no rebuild); each must lie in its range."""
+        """Change param values (no rebuild); each must lie in its range, and
+        so must every value computed from them. On an error nothing changes."""
         declared = {p.name: p for p in self.checked.params}
+        changed = dict(self.params)
         for name, value in values.items():
             info = declared.get(name)
             if info is None:
@@ -78,8 +80,9 @@ class Scene:
                 raise SceneError([diagnostic(self.checked.file, self.checked.source, info.span,
                                              f"'{name}' = {value:g} is outside its range "
                                              f"[{info.low:g}, {info.high:g}]")])
-            self.params[name] = value
-        check_param_values(self.checked, self._param_values())
+            changed[name] = value
+        check_param_values(self.checked, [changed[p.name] for p in self.checked.params])
+        self.params = changed
 
     def _param_values(self) -> list[float]:
         return [self.params[p.name] for p in self.checked.params]

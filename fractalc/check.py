@@ -327,7 +327,7 @@ class _Checker:
                           others: dict | None = None) -> None:
         items = data.items if isinstance(data, ir.Vec) else (data,)
         if not all(isinstance(x, ir.Const) for x in items):
-            if param.constraints or param.type == "int":
+            if (param.constraints or param.type == "int") and others is None:
                 self.param_checks.append(ParamCheck(span, data, param, owner))
             return   # depends on a param: checked for each set of param values
         values = [x.value for x in items]
@@ -369,10 +369,20 @@ class _Checker:
                 failed = True
         if failed:
             raise _Failed
-        constants = {k: v.value for k, v in converted.items() if isinstance(v, ir.Const)}
+        scalars = {k: v for k, v in converted.items() if isinstance(v, (ir.Const, ir.Param, ir.Op))}
         for p in signature.parameters:
-            if p.name in bound and any(c.startswith(("<=", ">=")) and c[2:3].isalpha() for c in p.constraints):
-                self.check_constraints(bound[p.name][0].value.span, converted[p.name], p, signature.name, constants)
+            # constraints between arguments, e.g. min_radius <= fixed_radius
+            related = tuple(c for c in p.constraints if c[:2] in ("<=", ">=") and c[2:3].isalpha())
+            if not related or p.name not in scalars:
+                continue
+            between = replace(p, constraints=related)
+            span = bound[p.name][0].value.span if p.name in bound else e.span
+            others = {c[2:]: scalars[c[2:]] for c in related if c[2:] in scalars}
+            if all(ir.is_const(x) for x in (scalars[p.name], *others.values())):
+                self.check_constraints(span, scalars[p.name], between, signature.name,
+                                       {k: v.value for k, v in others.items()})
+            else:
+                self.param_checks.append(ParamCheck(span, scalars[p.name], between, signature.name, others))
         return tuple(converted[p.name] for p in signature.parameters)
 
     def call(self, e: ast.Call) -> Value:
@@ -693,7 +703,10 @@ def check_param_values(scene: CheckedScene, values) -> None:
     """Check every value that depends on params, for these param values;
     raise SceneError at each value's span that is out of its range."""
     checker = _Checker(ast.Program((), scene.file, scene.source))
-    for check_ in scene.param_checks:
+    # checks between arguments last, and only if each argument is valid alone
+    for check_ in sorted(scene.param_checks, key=lambda c: bool(c.others)):
+        if check_.others and checker.errors:
+            break
         items = check_.value.items if isinstance(check_.value, ir.Vec) else (check_.value,)
         try:
             constants = tuple(ir.const(ir.evaluate(x, values)) for x in items)
@@ -702,9 +715,10 @@ def check_param_values(scene: CheckedScene, values) -> None:
                                        f"for these param values")
             continue
         data = ir.Vec(constants) if isinstance(check_.value, ir.Vec) else constants[0]
+        others = {k: ir.evaluate(v, values) for k, v in check_.others.items()}
         shown = ", ".join(f"{p.name} = {v:g}" for p, v in zip(scene.params, values))
         try:
-            checker.check_constraints(check_.span, data, check_.parameter, check_.owner)
+            checker.check_constraints(check_.span, data, check_.parameter, check_.owner, others)
         except _Failed:
             last = checker.errors.pop()
             checker.error(check_.span, f"{last.message} (with {shown})")

@@ -17,7 +17,10 @@ from .program import (DEFAULT_MATERIAL, CheckedScene, Coloring, Combination, Mat
 from .stdlib import TRAP_KINDS, library
 
 POINT = ir.Var("p", ir.VEC3)
-BOUND_MARGIN = 0.1      # evaluate a fractal within 10% of its bound radius of the bound
+# Evaluate a fractal within one bound radius of its bounding sphere. Beyond,
+# the sphere's distance (>= the radius) stands in; a ray takes that for a
+# hit only where the threshold exceeds the radius: a fractal under a pixel.
+BOUND_MARGIN = 1.0
 
 Point = tuple[ir.Expr, ir.Expr, ir.Expr]
 

@@ -156,6 +156,7 @@ class ParamCheck:
     value: object                # ir.Expr or ir.Vec
     parameter: Parameter
     owner: str
+    others: dict = field(default_factory=dict, hash=False)   # other arguments a constraint names
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from test_fractal_library import TOLERANCE, ball, relative_error, shell
 
 PRECISIONS = ("float", "double")
 SQRT3 = np.sqrt(3.0)
-MARGIN = 0.1                     # lower.BOUND_MARGIN: the fractal is evaluated within 1.1 R
+from fractalc.lower import BOUND_MARGIN as MARGIN   # evaluated within (1 + MARGIN) R
 ULP = {"float": np.finfo(np.float32).eps, "double": np.finfo(np.float64).eps}
 
 DEFAULTS = {
@@ -462,11 +462,13 @@ def _function_body(source, signature):
     raise AssertionError("unbalanced braces")
 
 
-BOUND_IF = re.compile(r"^(\s*)if \(ANY\((\w+) < \((\w+) \* 0\.1f?\)\)\) \{")
+# the margin R * MARGIN, or R itself where MARGIN is 1 (folded)
+_MARGIN = r"(\w+)" if MARGIN == 1 else rf"\((\w+) \* {MARGIN}f?\)"
+BOUND_IF = re.compile(rf"^(\s*)if \(ANY\((\w+) < {_MARGIN}\)\) \{{")
 
 
 def _check_bounded_structure(source, names):
-    """Each fractal's de_ call sits in an `if (ANY(b < (R * 0.1)))` block,
+    """Each fractal's de_ call sits in an `if (ANY(b < R * MARGIN))` block,
     b = sd_sphere(point, R) and R = <name>_bound_radius(...), assigned before."""
     body = _function_body(source, "real distance_estimate(")
     lines = body.splitlines()
@@ -494,8 +496,8 @@ def _check_bounded_structure(source, names):
         assert re.fullmatch(rf"sd_sphere\(.*, \(real\){radius_var}\)", bound_text), bound_text
         assert assigned[radius_var].startswith(f"{call.group(1)}_bound_radius("), assigned[radius_var]
         # the block ends by selecting the fractal's value where near
-        assert re.search(rf"{bound_var} = SELECT\({bound_var}, \w+, \({bound_var} < \({radius_var} \* 0\.1f?\)\)\);",
-                         body)
+        margin = radius_var if MARGIN == 1 else rf"\({radius_var} \* {MARGIN}f?\)"
+        assert re.search(rf"{bound_var} = SELECT\({bound_var}, \w+, \({bound_var} < {margin}\)\);", body)
     assert found == set(names), f"fractal calls {found}, expected {names}"
 
 
