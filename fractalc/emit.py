@@ -361,6 +361,8 @@ def _constants(scene_ir: SceneIR, target: Target) -> str:
         f"#define MAX_DISTANCE {literal(render.max_distance)}",
         f"#define HIT_EPSILON_IS_PIXEL {int(pixel)}",
         f"#define HIT_EPSILON {literal(0.0 if pixel else render.epsilon)}",
+        f"#define EPSILON_SCALE {literal(render.epsilon_scale)}",
+        f"#define FAST_MATH {int(render.fast_math == 'on')}",
         *(f"#define BACKGROUND_{c} {literal(v)}" for c, v in zip("RGB", render.background)),
         f"#define LANES_X {width}",
         f"#define LANES_Y {height}",
@@ -415,7 +417,8 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         roots.append(ir.Vec(tuple(scene_ir.bound[0]) + (scene_ir.bound[1],)))
     scene_functions = lib.closure(sorted({name for root in roots for name in _calls(root)}))
     placed = {f.name for f in scene_functions}
-    shading_functions = [f for f in lib.closure(["estimate_normal"] + shading_needs) if f.name not in placed]
+    normal_method = f"{scene.render.normals}_normal"
+    shading_functions = [f for f in lib.closure([normal_method] + shading_needs) if f.name not in placed]
 
     params = ", ".join(f"[{p.index}] {p.name} (default {p.default:g})" for p in scene.params) or "none"
     scalar = "double" if target.double else "float"
@@ -429,6 +432,8 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         "// ---- the scene " + "-" * 60,
         distance, _surface_function(scene_ir), bound,
         _library_text(shading_functions),
+        f"vec3 estimate_normal(vec3 p, real h, __constant scalar *params) {{\n"
+        f"    return {normal_method}(p, h, params);\n}}",
         shade,
         resolve_features(lib.template, _scene_features(scene_ir)),
     ]

@@ -54,6 +54,26 @@ typedef CONCAT(uint, LANES) lane_uint;
 #define STORE_LANES(v, i, ptr) CONCAT(vstore, LANES)((v), (i), (ptr))
 #endif
 
+#if FAST_MATH
+// Faster, less exact transcendental functions (render key fast_math; the
+// speed/error sweep of `fractalc bench --sweep` measures what they cost).
+// (#undef first: some drivers' headers define these names as macros)
+#undef sin
+#undef cos
+#undef exp
+#undef log
+#undef sqrt
+#undef rsqrt
+#undef sincos
+#define sin native_sin
+#define cos native_cos
+#define exp native_exp
+#define log native_log
+#define sqrt native_sqrt
+#define rsqrt native_rsqrt
+#define sincos(x, cosine) (*(cosine) = native_cos(x), native_sin(x))
+#endif
+
 typedef struct { real x, y, z; } vec3;
 
 vec3 v3(real x, real y, real z) { vec3 v = { x, y, z }; return v; }

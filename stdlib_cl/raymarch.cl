@@ -36,9 +36,9 @@
 // pixel subtends, or stays the scene's constant epsilon.
 real hit_threshold(real t, scalar pixel_angle) {
 #if HIT_EPSILON_IS_PIXEL
-    return max(t * pixel_angle, (real)SCALAR_MIN_EPSILON);
+    return max(t * (pixel_angle * EPSILON_SCALE), (real)SCALAR_MIN_EPSILON);
 #else
-    return (real)HIT_EPSILON;
+    return (real)(HIT_EPSILON * EPSILON_SCALE);
 #endif
 }
 

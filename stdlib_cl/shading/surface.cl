@@ -1,12 +1,20 @@
-// Surface normals and Blinn-Phong lighting. Normals: tetrahedral differences
-// (4 evaluations, Quilez "normals for an SDF"), step tied to the hit
-// threshold so that detail below the pixel footprint is not amplified.
-vec3 estimate_normal(vec3 p, real h, __constant scalar *params) {
+// Surface normals and Blinn-Phong lighting. Normals are the normalised
+// gradient of the distance by finite differences with a step h tied to the
+// hit threshold, so that detail below the pixel footprint is not amplified:
+// tetrahedral (4 evaluations, Quilez "normals for an SDF") or central (6).
+vec3 tetrahedral_normal(vec3 p, real h, __constant scalar *params) {
     real a = distance_estimate(v3(p.x + h, p.y - h, p.z - h), params);
     real b = distance_estimate(v3(p.x - h, p.y - h, p.z + h), params);
     real c = distance_estimate(v3(p.x - h, p.y + h, p.z - h), params);
     real d = distance_estimate(v3(p.x + h, p.y + h, p.z + h), params);
     return v3_normalize(v3(a - b - c + d, -a - b + c + d, -a + b - c + d));
+}
+
+vec3 central_normal(vec3 p, real h, __constant scalar *params) {
+    real dx = distance_estimate(v3(p.x + h, p.y, p.z), params) - distance_estimate(v3(p.x - h, p.y, p.z), params);
+    real dy = distance_estimate(v3(p.x, p.y + h, p.z), params) - distance_estimate(v3(p.x, p.y - h, p.z), params);
+    real dz = distance_estimate(v3(p.x, p.y, p.z + h), params) - distance_estimate(v3(p.x, p.y, p.z - h), params);
+    return v3_normalize(v3(dx, dy, dz));
 }
 
 // Blinn-Phong: (albedo * max(n.l, 0) + specular * max(n.h, 0)^shininess)
