@@ -1,0 +1,63 @@
+"""Runtime failures: exit 1 with one line, no traceback, no output file;
+Ctrl-C stops cleanly."""
+import os
+import subprocess
+import sys
+
+import pytest
+
+from fractalc import build, cli, run
+
+SCENE = "scene sphere(1)\nrender { width: 32, height: 24 }\n"
+
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _fractalc(*args, cwd, env=None):
+    path = os.pathsep.join([REPO, os.environ.get("PYTHONPATH", "")])
+    return subprocess.run([sys.executable, "-m", "fractalc", *args], cwd=cwd, capture_output=True, text=True,
+                          timeout=120, env={**os.environ, "PYTHONPATH": path, **(env or {})})
+
+
+@pytest.mark.parametrize("command", [["devices"], ["render", "scene.frac", "-o", "out.png"]])
+def test_no_opencl_platform_says_how_to_install_pocl(tmp_path, command):
+    (tmp_path / "scene.frac").write_text(SCENE)
+    result = _fractalc(*command, cwd=tmp_path, env={"OCL_ICD_VENDORS": str(tmp_path / "no-vendors")})
+    assert result.returncode == 1
+    assert "pocl" in result.stderr.lower() and "Traceback" not in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out.png").exists()
+
+
+def test_a_kernel_that_fails_to_build_is_reported_with_its_log(tmp_path, monkeypatch, capsys):
+    (tmp_path / "scene.frac").write_text(SCENE)
+    real_build = build.build
+
+    def broken(source, device, *args, **kwargs):
+        return real_build(source + "\nthis is not OpenCL;\n", device, *args, **kwargs)
+
+    monkeypatch.setattr("fractalc.api.build", broken)
+    status = cli.main(["render", str(tmp_path / "scene.frac"), "-o", str(tmp_path / "out.png"), "-q"])
+    err = capsys.readouterr().err
+    assert status == 1 and "failed to build" in err and "Traceback" not in err
+    log_dir = err.strip().split()[-1]
+    assert os.path.isfile(os.path.join(log_dir, "build.log")) and os.path.isfile(os.path.join(log_dir, "kernel.cl"))
+    assert "this is not OpenCL" in open(os.path.join(log_dir, "kernel.cl")).read()
+    assert not (tmp_path / "out.png").exists()
+
+
+def test_ctrl_c_stops_cleanly_without_output(tmp_path, monkeypatch, capsys):
+    (tmp_path / "scene.frac").write_text(SCENE)
+    out = tmp_path / "out.png"
+    out.write_bytes(b"previous image")
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(run, "render", interrupted)
+    status = cli.main(["render", str(tmp_path / "scene.frac"), "-o", str(out), "-q"])
+    err = capsys.readouterr().err
+    assert status == 130 and "interrupted" in err and "Traceback" not in err
+    assert out.read_bytes() == b"previous image"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png", "scene.frac"]   # no temporary left
