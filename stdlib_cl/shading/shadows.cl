@@ -11,7 +11,7 @@ real hard_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, mask ac
         real d = distance_estimate(v3_add(origin, v3_scale(to_light, t)), params);
         mask blocked = active & (d < threshold);
         visible = SELECT(visible, (real)0.0f, blocked);
-        t = t + d;
+        t = t + max(d, threshold);
         active = active & !blocked & (t < max_t);
     }
     return visible;
