@@ -13,19 +13,38 @@ which fold constants: an expression with no `Param` or `Var` in it is a
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Callable, Union
 
 REAL, INT, MASK, VEC3 = "real", "int", "mask", "vec3"
 
 
-@dataclass(frozen=True)
+def node(cls):
+    """A frozen dataclass whose hash is computed once: the IR is a DAG that
+    is hashed at every lookup, and a recursive hash would make that
+    quadratic in its depth."""
+    cls = dataclass(frozen=True)(cls)
+    names = tuple(f.name for f in fields(cls))
+
+    def cached_hash(self):
+        try:
+            return self.__dict__["_hash"]
+        except KeyError:
+            value = hash((cls.__name__,) + tuple(getattr(self, n) for n in names))
+            object.__setattr__(self, "_hash", value)
+            return value
+
+    cls.__hash__ = cached_hash
+    return cls
+
+
+@node
 class Const:
     value: float
     type: str = REAL
 
 
-@dataclass(frozen=True)
+@node
 class Param:
     """A scene `param`: a kernel argument, uniform over all rays."""
     index: int
@@ -33,13 +52,13 @@ class Param:
     type: str = REAL
 
 
-@dataclass(frozen=True)
+@node
 class Var:
     name: str
     type: str
 
 
-@dataclass(frozen=True)
+@node
 class Op:
     """A built-in operation: arithmetic, a math function, a comparison or
     `select(condition, if_true, if_false)`."""
@@ -48,7 +67,7 @@ class Op:
     type: str = REAL
 
 
-@dataclass(frozen=True)
+@node
 class Call:
     """A call of an OpenCL library function from `stdlib_cl/`."""
     function: str
@@ -56,7 +75,7 @@ class Call:
     type: str
 
 
-@dataclass(frozen=True)
+@node
 class Comp:
     """Component `index` (0..2) of a vec3-valued expression."""
     vector: "Expr"
@@ -64,7 +83,7 @@ class Comp:
     type: str = REAL
 
 
-@dataclass(frozen=True)
+@node
 class Vec:
     """A vector of scalar expressions (2 to 4 components)."""
     items: tuple["Expr", ...]
@@ -73,7 +92,7 @@ class Vec:
         return len(self.items)
 
 
-@dataclass(frozen=True)
+@node
 class Bounded:
     """`inner` where `bound < margin`, else `bound`: a conservative bounding
     distance that spares evaluating `inner` (a fractal) far from it. Both
