@@ -52,7 +52,6 @@ real mandelbulb_orbit(vec3 p, real power, int iterations, real bailout, orbit_tr
         real r = v3_length(z);
         active = active & (r <= bailout);
         if (!ANY(active)) break;
-        real log_r = log(r);
         vec3 z_power;       // the triplex power z^power: r^power times a direction
         real r_power1;      // r^(power-1)
         if (ALL(power == 8.0f)) {
@@ -63,6 +62,7 @@ real mandelbulb_orbit(vec3 p, real power, int iterations, real bailout, orbit_tr
         } else {
             // r^power as exp(power ln r): pow costs ~10x exp + log on vector
             // lanes (PoCL); 0^0 = 1 at power 1.
+            real log_r = log(r);
             z_power = v3_scale(mandelbulb_direction(z, r, power), exp(power * log_r));
             r_power1 = SELECT(exp((power - 1.0f) * log_r), (real)1.0f, power == 1.0f);
         }
@@ -73,7 +73,7 @@ real mandelbulb_orbit(vec3 p, real power, int iterations, real bailout, orbit_tr
         // ... or both divided by r^power when that is too large.
         mask escapes = active & (r_power > 1e12f);
         if (ANY(escapes)) {
-            real log_power = power * log_r;
+            real log_power = power * log(r);
             real inverse = exp(-log_power);
             vec3 direction = mandelbulb_direction(z, r, power);
             z_next = v3_select(z_next, v3_add(direction, v3_scale(p, inverse)), escapes);
