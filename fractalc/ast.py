@@ -143,7 +143,22 @@ class RenderDecl:
     span: Span
 
 
-Decl = Union[ParamDecl, LetDecl, MaterialDecl, SceneDecl, CameraDecl, LightDecl, RenderDecl]
+@node
+class Keyframe:
+    """`TIME: { ... }` in a path: camera keys and param values at that time."""
+    time: float
+    time_span: Span
+    block: Block
+    span: Span
+
+
+@node
+class PathDecl:
+    keyframes: tuple[Keyframe, ...]
+    span: Span
+
+
+Decl = Union[ParamDecl, LetDecl, MaterialDecl, SceneDecl, CameraDecl, LightDecl, RenderDecl, PathDecl]
 
 
 @node

@@ -83,6 +83,27 @@ def _memory_gib() -> float:
         return float("nan")
 
 
+def machine(scene: Scene) -> dict:
+    """The OpenCL device and the computer a scene renders on."""
+    info = scene.device.info
+    return {"device": info.name, "platform": info.platform, "driver": info.driver,
+            "opencl_version": info.version, "cpu": _cpu_model(), "cores": os.cpu_count() or 0,
+            "memory_gib": round(_memory_gib(), 1)}
+
+
+def machine_rows(figures: dict) -> list[tuple[str, str]]:
+    """The device and machine lines of a report, from `machine`'s figures."""
+    f = figures
+    return [("device", f"{f['device']} ({f['platform']}; {f['opencl_version']}; driver {f['driver']})"),
+            ("machine", f"{f['cpu']}, {f['cores']} cores, {f['memory_gib']} GiB")]
+
+
+def aligned(rows: list[tuple[str, str]]) -> str:
+    """`name  value` lines, the values aligned."""
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+
 def frame_statistics(frame_seconds: list[float]) -> dict[str, float]:
     """min/avg/max frame time in ms and the FPS each implies (1000 / ms)."""
     ms = [s * 1000.0 for s in frame_seconds]
@@ -111,12 +132,10 @@ def bench(scene: Scene, frames: int = 30, width: int | None = None, height: int 
             seconds.append(time.perf_counter() - start)
         runs.append(frame_statistics(seconds))
     medians = {key: statistics.median(run[key] for run in runs) for key in runs[0]}
-    info = scene.device.info
     return BenchResult(
         scene=scene.checked.file, width=width, height=height, frames=frames, repeat=repeat,
-        compile_seconds=compile_seconds, **medians, device=info.name, platform=info.platform,
-        driver=info.driver, opencl_version=info.version, cpu=_cpu_model(), cores=os.cpu_count() or 0,
-        memory_gib=round(_memory_gib(), 1), precision=scene.precision, lanes=scene.device.lanes)
+        compile_seconds=compile_seconds, **medians, **machine(scene), precision=scene.precision,
+        lanes=scene.device.lanes)
 
 
 def table(result: BenchResult) -> str:
@@ -129,9 +148,7 @@ def table(result: BenchResult) -> str:
         ("duration", f"{r.duration_seconds:.3f} s"),
         ("frame time", f"min {r.frame_ms_min:.1f} ms, avg {r.frame_ms_avg:.1f} ms, max {r.frame_ms_max:.1f} ms"),
         ("FPS", f"avg {r.fps_avg:.2f}, min {r.fps_min:.2f}, max {r.fps_max:.2f}"),
-        ("device", f"{r.device} ({r.platform}; {r.opencl_version}; driver {r.driver})"),
         ("kernel", f"{r.precision}, {r.lanes} ray{'s' if r.lanes > 1 else ''} per work-item"),
-        ("machine", f"{r.cpu}, {r.cores} cores, {r.memory_gib} GiB"),
+        *machine_rows(r.as_dict()),
     ]
-    width = max(len(k) for k, _ in rows)
-    return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+    return aligned(rows)

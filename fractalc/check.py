@@ -13,8 +13,8 @@ from dataclasses import dataclass, replace
 
 from . import ast, ir
 from .errors import Diagnostic, SceneError, Span, diagnostic
-from .program import (DEFAULT_MATERIAL, Camera, CheckedScene, Coloring, Combination, Fog, Glow, Light,
-                      Material, ParamCheck, ParamInfo, Primitive, RenderSettings, Slice,
+from .program import (DEFAULT_MATERIAL, Camera, CameraPath, CheckedScene, Coloring, Combination, Fog, Glow,
+                      Keyframe, Light, Material, ParamCheck, ParamInfo, Primitive, RenderSettings, Slice,
                       Transformed, WithMaterial)
 from .stdlib import COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
 
@@ -83,7 +83,7 @@ class _Checker:
                     self.error(decl.name_span, f"'{decl.name}' is already declared (line {first.line})")
                     continue
                 names[decl.name] = decl.name_span
-            if isinstance(decl, (ast.SceneDecl, ast.CameraDecl, ast.RenderDecl)):
+            if isinstance(decl, (ast.SceneDecl, ast.CameraDecl, ast.RenderDecl, ast.PathDecl)):
                 kind = type(decl).__name__.removesuffix("Decl").lower()
                 if type(decl) in singles:
                     first = singles[type(decl)].span
@@ -119,11 +119,12 @@ class _Checker:
         camera = self.camera(singles.get(ast.CameraDecl))
         lights = tuple(self.light(d) for d in decls if isinstance(d, ast.LightDecl))
         render = self.render(singles.get(ast.RenderDecl))
+        path = self.path(singles.get(ast.PathDecl))
         if self.errors:
             raise SceneError(self.errors)
         scene = CheckedScene(self.program.file, self.program.source, tuple(self.params.values()),
                              self.materials, shape, camera, tuple(l for l in lights if l), render,
-                             tuple(self.param_checks))
+                             tuple(self.param_checks), path)
         check_param_values(scene, [p.default for p in scene.params])
         return scene
 
@@ -577,6 +578,35 @@ class _Checker:
     def render(self, decl: ast.RenderDecl | None) -> RenderSettings:
         found = self.entries(decl.block if decl else None, RENDER_KEYS, "render")
         return RenderSettings(**found)
+
+    def path(self, decl: ast.PathDecl | None) -> CameraPath | None:
+        """Keyframes take the camera's keys (constants, checked the same way)
+        and values of params (in the params' ranges); a camera key wins over
+        a param of the same name."""
+        if decl is None:
+            return None
+        keys = dict(CAMERA_KEYS)
+        for name, info in self.params.items():
+            in_range = (f"{info.low!r}..{info.high!r}",) if None not in (info.low, info.high) else ()
+            keys.setdefault(name, _P(name, "num", None, *in_range))
+        keyframes = []
+        for before, frame in zip((None,) + decl.keyframes, decl.keyframes):
+            if before is not None and frame.time <= before.time:
+                self.error(frame.time_span, f"keyframe times must increase: {frame.time:g} does not come after "
+                                            f"{before.time:g} (line {before.span.line})")
+            found = self.entries(frame.block, keys, "path")
+            camera = {key: found.pop(key) for key in CAMERA_KEYS if key in found}
+            if "position" not in camera:
+                if not any(e.key == "position" for e in frame.block.entries):
+                    self.error(frame.time_span, f"the keyframe at {frame.time:g} needs a 'position'")
+                continue
+            if camera.get("target") == camera["position"]:
+                where = next(e.value.span for e in frame.block.entries if e.key == "target")
+                self.error(where, "the keyframe's target is its position: it looks nowhere")
+            keyframes.append(Keyframe(frame.time, **camera, params=tuple(found.items())))
+        if len(decl.keyframes) < 2:
+            self.error(decl.span, f"a path needs at least two keyframes, this one has {len(decl.keyframes)}")
+        return CameraPath(tuple(keyframes), decl.span)
 
 
 def _default(p: Parameter):

@@ -122,12 +122,99 @@ def command_bench(args) -> int:
                         ("--height", height)):
         if value is not None and value < 1:
             raise UsageError(f"{name} must be at least 1")
-    scene = _load(args)
-    result = bench(scene, frames=args.frames, width=width, height=height, repeat=args.repeat,
-                   use_cache=not args.no_cache)
-    print(table(result))
+    if not args.sweep:
+        for name, value in (("--csv", args.csv), ("--plot", args.plot), ("--vary", args.vary)):
+            if value:
+                raise UsageError(f"{name} goes with --sweep")
+        scene = _load(args)
+        result = bench(scene, frames=args.frames, width=width, height=height, repeat=args.repeat or 1,
+                       use_cache=not args.no_cache)
+        print(table(result))
+        if args.json:
+            _write_text_atomically(args.json, json.dumps(result.as_dict(), indent=2) + "\n")
+        return 0
+    from . import sweep
     if args.json:
-        _write_text_atomically(args.json, json.dumps(result.as_dict(), indent=2) + "\n")
+        raise UsageError("--json is for the orbit benchmark; --sweep writes --csv FILE")
+    if args.plot and not args.plot.lower().endswith(".png"):
+        raise UsageError(f"--plot {args.plot}: the plot is a PNG, its name must end in .png")
+    try:
+        changes = sweep.parse_changes(args.vary) if args.vary else None
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    if args.plot:
+        sweep.require_matplotlib()     # before minutes of rendering, not after
+    scene = _load(args)
+    result = sweep.sweep(scene, width=width, height=height, repeat=args.repeat or sweep.DEFAULT_REPEAT,
+                         changes=changes, combine=changes is None, use_cache=not args.no_cache,
+                         progress=lambda message: print(f"sweep: {message}", file=sys.stderr, flush=True))
+    print(sweep.table(result))
+    if args.csv:
+        _write_text_atomically(args.csv, sweep.csv_text(result))
+    if args.plot:
+        sweep.save_plot(result, args.plot)
+    return 0
+
+
+def _require_positive(*options) -> None:
+    for name, value in options:
+        if value is not None and value < 1:
+            raise UsageError(f"{name} must be at least 1")
+
+
+def command_view(args) -> int:
+    _require_positive(("--width", args.width), ("--height", args.height),
+                      ("--preview-scale", args.preview_scale), ("--max-samples", args.max_samples),
+                      ("--benchmark", args.benchmark))
+    _require_file(args.scene)
+    from .view import Viewer, measure, show
+    viewer = Viewer(args.scene, args.width, args.height, params=_parse_set(args.set),
+                    precision=args.precision, device=args.device, preview_scale=args.preview_scale,
+                    max_samples=args.max_samples, output_dir=args.output_dir)
+    if args.benchmark:
+        fps = measure(viewer, args.benchmark)
+        print(f"{args.scene}: {fps:.1f} FPS while moving ({args.benchmark} frames at "
+              f"{max(1, viewer.width // viewer.preview_scale)}x{max(1, viewer.height // viewer.preview_scale)} "
+              f"in a {viewer.width}x{viewer.height} window)")
+    else:
+        show(viewer)
+    return 0
+
+
+def command_animate(args) -> int:
+    try:
+        first, second = args.output % 0, args.output % 1
+    except (TypeError, ValueError):
+        first = second = None
+    if first is None or first == second:
+        raise UsageError(f"-o {args.output}: the name must hold the frame number, e.g. frames/frame_%04d.png")
+    if not first.lower().endswith((".exr", ".png")):
+        raise UsageError(f"-o {args.output}: frames must be .exr or .png")
+    if args.mp4 and not args.mp4.lower().endswith(".mp4"):
+        raise UsageError(f"--mp4 {args.mp4}: the name must end in .mp4")
+    if not args.fps > 0:
+        raise UsageError("--fps must be greater than 0")
+    _require_positive(("--width", args.width), ("--height", args.height), ("--samples", args.samples))
+    from .animate import render_frames, require_mp4_writer, write_mp4
+    if args.mp4:
+        require_mp4_writer()
+    scene = _load(args)
+    if scene.checked.path is None:
+        raise UsageError(f"{args.scene} has no 'path' to animate (see docs/animation.md)")
+    overrides = {"width": args.width, "height": args.height, "samples": args.samples}
+    start = time.perf_counter()
+    try:
+        files, rendered = render_frames(scene, args.output, args.fps, seed=args.seed, overwrite=args.overwrite,
+                                        progress=not args.quiet, **overrides)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    if args.mp4:
+        write_mp4(files, args.mp4, args.fps)
+    if not args.quiet:
+        kept = len(files) - rendered
+        print(f"wrote {rendered} of {len(files)} frames ({kept} already there) to "
+              f"{os.path.dirname(args.output) or '.'}{', and ' + args.mp4 if args.mp4 else ''} "
+              f"({time.perf_counter() - start:.2f} s)", file=sys.stderr)
     return 0
 
 
@@ -176,17 +263,66 @@ def _parser() -> argparse.ArgumentParser:
     bench_ = commands.add_parser("bench", help="measure frame times along a camera orbit",
                                  description="The benchmark of seed 000: render --frames frames along an "
                                              "orbit of the camera about its target; report frame-time "
-                                             "statistics, compile time and the machine.")
+                                             "statistics, compile time and the machine. With --sweep: "
+                                             "render time against error over the quality knobs "
+                                             "(docs/performance.md).")
     bench_.add_argument("scene")
     bench_.add_argument("--frames", type=int, default=30)
     bench_.add_argument("--width", type=int)
     bench_.add_argument("--height", type=int)
     bench_.add_argument("--resolution", help="1366x768, 1920x1080, 2560x1440, 3840x2160 (or 720p, 1080p, 1440p, 4k)")
-    bench_.add_argument("--repeat", type=int, default=1, help="runs of the whole path; figures are medians")
+    bench_.add_argument("--repeat", type=int, help="runs of the whole path; figures are medians (default 1); "
+                                                   "with --sweep, timed renders per row (default 3)")
     bench_.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
+    bench_.add_argument("--sweep", action="store_true",
+                        help="speed against error: vary the quality knobs one at a time (and a few "
+                             "combinations) and compare each render with a reference render")
+    bench_.add_argument("--vary", action="append", metavar="KNOB=V[,V...]",
+                        help="with --sweep: only these one-knob changes (repeatable; knobs: epsilon_scale, "
+                             "max_steps, precision, fast_math, normals, overrelax, samples)")
+    bench_.add_argument("--csv", metavar="FILE", help="with --sweep: also write the rows as CSV")
+    bench_.add_argument("--plot", metavar="FILE.png", help="with --sweep: also plot time against error "
+                                                          "(needs matplotlib)")
     bench_.add_argument("--no-cache", action="store_true", help="compile the kernel even if it is cached")
     device_options(bench_)
     bench_.set_defaults(run=command_bench)
+
+    view = commands.add_parser("view", help="explore a scene in a window",
+                               description="Open a window on the scene: fly with W A S D Q E, drag to "
+                                           "look, Tab and [ ] change params, C prints the camera, P saves "
+                                           "the view, H shows every key. Saving the file reloads it. "
+                                           "Needs a display and pygame (the 'view' extra).")
+    view.add_argument("scene")
+    view.add_argument("--width", type=int, help="window width (default: the file's render width)")
+    view.add_argument("--height", type=int, help="window height (default: the file's render height)")
+    view.add_argument("--preview-scale", type=int, default=2, metavar="N",
+                      help="while moving, render at 1/N of the window's width and height (default 2)")
+    view.add_argument("--max-samples", type=int, default=64, metavar="N",
+                      help="refine a still view up to this many samples per pixel (default 64)")
+    view.add_argument("--output-dir", default=".", metavar="DIR", help="where P saves the view (default: here)")
+    view.add_argument("--benchmark", type=int, metavar="FRAMES",
+                      help="orbit the camera for FRAMES frames, print the frame rate and exit "
+                           "(SDL_VIDEODRIVER=dummy runs it without a display)")
+    device_options(view)
+    view.set_defaults(run=command_view)
+
+    animate = commands.add_parser("animate", help="render the scene's camera path to frames",
+                                  description="Render the frames of the scene's 'path' (first keyframe "
+                                              "to last, at --fps). Frames already on disk are kept, so "
+                                              "running it again resumes.")
+    animate.add_argument("scene")
+    animate.add_argument("-o", "--output", required=True,
+                         help="frame files with the frame number, e.g. frames/frame_%%04d.png (.exr or .png)")
+    animate.add_argument("--fps", type=float, default=30.0, help="frames per second (default 30)")
+    animate.add_argument("--mp4", metavar="FILE", help="also encode the frames as an MP4 (the 'mp4' extra)")
+    animate.add_argument("--overwrite", action="store_true", help="render every frame, even those on disk")
+    animate.add_argument("--width", type=int)
+    animate.add_argument("--height", type=int)
+    animate.add_argument("--samples", type=int, help="anti-aliasing samples per pixel")
+    animate.add_argument("--seed", type=int, default=0, help="jitter seed for samples > 1 (the same each frame)")
+    animate.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    device_options(animate)
+    animate.set_defaults(run=command_animate)
 
     devices = commands.add_parser("devices", help="list OpenCL devices")
     devices.set_defaults(run=command_devices)

@@ -144,6 +144,13 @@ class _ToAst(Transformer_NonRecursive):
     def render_decl(self, meta, c):
         return ast.RenderDecl(c[0], _span(meta))
 
+    def keyframe(self, meta, c):
+        return ast.Keyframe(float(c[0]), _span(c[0]), c[1], _span(meta))
+
+    def path_decl(self, meta, c):
+        keyframes = tuple(x for x in c if isinstance(x, ast.Keyframe))
+        return ast.PathDecl(keyframes, _span(meta))
+
     def start(self, meta, c):
         return tuple(c)
 

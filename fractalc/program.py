@@ -163,6 +163,35 @@ class ParamCheck:
 
 
 @dataclass(frozen=True)
+class Keyframe:
+    """A path keyframe: the camera values and param values given at `time`
+    (None, or no entry in `params`: not given here; see `paths`)."""
+    time: float
+    position: Vector3
+    target: Vector3 | None = None
+    up: Vector3 | None = None
+    fov: float | None = None
+    aperture: float | None = None
+    focus: float | None = None
+    params: tuple[tuple[str, float], ...] = ()    # (name, value) in the order written
+
+
+@dataclass(frozen=True)
+class CameraPath:
+    """A `path` declaration: two or more keyframes, times increasing."""
+    keyframes: tuple[Keyframe, ...]
+    span: Span
+
+    @property
+    def start(self) -> float:
+        return self.keyframes[0].time
+
+    @property
+    def end(self) -> float:
+        return self.keyframes[-1].time
+
+
+@dataclass(frozen=True)
 class CheckedScene:
     file: str
     source: str
@@ -173,3 +202,4 @@ class CheckedScene:
     lights: tuple[Light, ...] = ()           # empty: a headlight
     render: RenderSettings = RenderSettings()
     param_checks: tuple[ParamCheck, ...] = ()
+    path: CameraPath | None = None

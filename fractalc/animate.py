@@ -1,0 +1,101 @@
+"""`fractalc animate`: a scene's camera path rendered to numbered frames,
+and optionally an MP4 of them.
+
+Frames already on disk are kept, so a run that stopped resumes where it
+stopped; each frame file appears atomically (`Image.save`), so a frame on
+disk is a whole frame.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+from dataclasses import replace
+
+import numpy as np
+
+from .api import Scene
+from .errors import RenderError
+from .paths import camera_at, frame_times, params_at
+from .write import linear_to_srgb, publish
+
+
+def frame_file(pattern: str, index: int) -> str:
+    """The file of frame `index`: `pattern` holds a printf number, e.g.
+    `frames/frame_%04d.png`."""
+    return pattern % index
+
+
+def render_frames(scene: Scene, pattern: str, fps: float, seed: int = 0, overwrite: bool = False,
+                  progress: bool = False, **render_keys) -> tuple[list[str], int]:
+    """Render every frame of the scene's path that is not on disk yet (all
+    of them with `overwrite`). Returns the frame files, in order, and how
+    many were rendered now. The scene's params are restored afterwards."""
+    from tqdm import tqdm
+    path = scene.checked.path
+    if path is None:
+        raise ValueError(f"{scene.checked.file} has no 'path' to animate")
+    times = frame_times(path, fps)
+    files = [frame_file(pattern, i) for i in range(len(times))]
+    missing = [i for i, f in enumerate(files) if overwrite or not os.path.exists(f)]
+    os.makedirs(os.path.dirname(os.path.abspath(files[0])), exist_ok=True)
+    original = dict(scene.params)
+    bar = tqdm(total=len(files), initial=len(files) - len(missing), unit="frame", leave=False,
+               disable=not (progress and sys.stderr.isatty()), desc="animating")
+    try:
+        for index in missing:
+            time = float(times[index])
+            scene.set_params(params_at(path, time))
+            image = scene.render(seed=seed, camera=camera_at(path, scene.checked.camera, time), **render_keys)
+            metadata = {**image.metadata, "path.frame": str(index), "path.time": f"{time:g}"}
+            replace(image, metadata=metadata).save(files[index])
+            bar.update(1)
+    finally:
+        bar.close()
+        scene.set_params(original)
+    return files, len(missing)
+
+
+def _display_pixels(file: str) -> np.ndarray:
+    """A frame file as sRGB 8-bit RGB: PNG as it is, EXR converted."""
+    import OpenImageIO as oiio
+    image = oiio.ImageInput.open(file)
+    if image is None:
+        raise RenderError(f"cannot read {file}: {oiio.geterror()}")
+    pixels = np.asarray(image.read_image(oiio.FLOAT))[..., :3]
+    image.close()
+    if file.lower().endswith(".exr"):
+        pixels = linear_to_srgb(pixels)
+    return np.round(np.clip(pixels, 0.0, 1.0) * 255.0).astype(np.uint8)
+
+
+def require_mp4_writer() -> None:
+    """Fail before any rendering if MP4 output cannot be written."""
+    try:
+        import imageio  # noqa: F401
+        import imageio_ffmpeg  # noqa: F401
+    except ImportError:
+        raise RenderError("writing MP4 needs imageio and imageio-ffmpeg: pip install 'fractalc[mp4]'") from None
+
+
+def write_mp4(files: list[str], path: str, fps: float) -> None:
+    """Encode the frames as H.264 (yuv420p, which players expect) into
+    `path`, atomically."""
+    require_mp4_writer()
+    import imageio.v2 as imageio
+    directory = os.path.dirname(os.path.abspath(path))
+    handle, temporary = tempfile.mkstemp(prefix=".fractalc-", suffix=".mp4", dir=directory)
+    os.close(handle)
+    try:
+        # yuv420p halves the chroma resolution: sizes must be even
+        writer = imageio.get_writer(temporary, format="FFMPEG", mode="I", fps=fps, codec="libx264",
+                                    pixelformat="yuv420p", macro_block_size=2, quality=8)
+        try:
+            for file in files:
+                writer.append_data(_display_pixels(file))
+        finally:
+            writer.close()
+        publish(temporary, path)
+    finally:
+        if os.path.exists(temporary):
+            os.unlink(temporary)

@@ -1,0 +1,217 @@
+"""Hard cases: the scene files of this folder, rendered tiny (at most 48 x 36).
+
+Each render must give finite planes (+inf depth only where a ray missed)
+and pass one check that fails when its case goes wrong: the camera a hair
+from a fractal, rays grazing a plane, the camera inside a solid, fractal
+parameters at their edges (power 2, 64 iterations, bailout 1e6, a negative
+Mandelbox scale) against the numpy sphere tracer of tests/test_fractals.py,
+and points a million units away, in float and in double.
+"""
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fractalc
+import reference_fractals as ref
+from test_effects import ray_sphere
+from test_fractals import bounded_reference_de, primary_rays, sphere_trace
+
+HERE = Path(__file__).resolve().parent
+PRECISIONS = ("float", "double")
+
+
+@lru_cache(maxsize=None)
+def scene(name, precision="float"):
+    return fractalc.load(HERE / f"{name}.frac", precision=precision)
+
+
+@lru_cache(maxsize=None)
+def rendered(name, precision="float"):
+    return scene(name, precision).render()
+
+
+def rays(s):
+    """The camera position and the pixel-centre ray directions (H, W, 3) of a
+    scene, from LANGUAGE.md's camera model."""
+    c, r = s.checked.camera, s.checked.render
+    return primary_rays(c.position, c.target, c.up, c.fov, r.width, r.height)
+
+
+def pixel_angle(s):
+    return 2 * np.tan(np.radians(s.checked.camera.fov) / 2) / s.checked.render.height
+
+
+def assert_finite_planes(image):
+    for name, plane in (("rgba", image.rgba), ("normal", image.normal), ("steps", image.steps)):
+        assert np.isfinite(plane).all(), f"{name} has NaN or Inf"
+    assert not np.isnan(image.depth).any() and (image.depth >= 0).all()
+    assert np.isposinf(image.depth[~np.isfinite(image.depth)]).all()
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in HERE.glob("*.frac")))
+def test_every_plane_is_finite(name):
+    for precision in PRECISIONS:
+        assert_finite_planes(rendered(name, precision))
+
+
+# ---------------------------------------------------------- the camera 1e-3 from a surface
+
+NEAR = 1e-3     # the camera's distance to the target, a surface point
+
+
+def test_camera_a_hair_from_the_mandelbulb_sees_its_surface_at_that_distance():
+    s = scene("near_mandelbulb")
+    camera = np.asarray(s.checked.camera.position)
+    assert np.linalg.norm(np.subtract(s.checked.camera.target, camera)) == pytest.approx(NEAR, rel=1e-6)
+    assert 0 < ref.mandelbulb(camera[None])[0] < NEAR      # outside, and the surface is near
+    float_, double = rendered("near_mandelbulb"), rendered("near_mandelbulb", "double")
+    height, width = float_.depth.shape
+    for image in (float_, double):
+        assert np.isfinite(image.depth).all(), "the surface fills the view"
+        # the centre ray runs to the target: it stops within a few hit
+        # thresholds (a pixel's footprint, 3% of the distance) before it
+        assert image.depth[height // 2, width // 2] == pytest.approx(NEAR, rel=0.1)
+        assert image.depth.max() < 20 * NEAR
+        lengths = np.linalg.norm(image.normal, axis=-1)
+        assert np.all(np.abs(lengths - 1) < 1e-3)
+        _, directions = rays(s)
+        facing = np.sum(image.normal * directions, axis=-1) < 0
+        assert facing.mean() > 0.95, "normals face the camera"
+    relative = np.abs(float_.depth - double.depth) / double.depth
+    assert np.median(relative) < 1e-3 and np.percentile(relative, 95) < 0.05
+
+
+# ---------------------------------------------------------- grazing rays along a plane
+
+def grazing_prediction(s):
+    """For each pixel ray from height h towards the plane z = 0 at slope
+    -dir.z, the march of LANGUAGE.md with a fixed threshold e: its height
+    after k steps is h (1 - slope)^k, it hits at the first height below e,
+    taking k + 1 distance evaluations, at t = (h - height) / slope."""
+    origin, directions = rays(s)
+    h, epsilon = origin[2], s.checked.render.epsilon
+    slope = -directions[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = np.ceil(np.log(epsilon / h) / np.log1p(-slope))
+    k = np.where(slope > 0, k, np.inf)
+    t = (h - h * (1 - slope) ** k) / np.where(slope > 0, slope, 1)
+    return slope, k + 1, np.where(slope > 0, t, np.inf)
+
+
+@pytest.mark.parametrize("precision", PRECISIONS)
+def test_grazing_rays_hit_the_plane_where_the_march_predicts(precision):
+    s = scene("grazing_plane", precision)
+    image = rendered("grazing_plane", precision)
+    slope, steps, depth = grazing_prediction(s)
+    render = s.checked.render
+    reached = (steps <= render.max_steps - 1) & (depth < render.max_distance)
+    out_of_steps = (slope > 0) & (steps >= render.max_steps + 2)
+    assert reached.sum() >= 200 and out_of_steps.any()
+    hit = np.isfinite(image.depth)
+    assert hit[reached].all(), "rays that reach the plane within max_steps hit it"
+    assert not hit[slope <= 0].any(), "rays level with or above the horizon miss"
+    assert not hit[out_of_steps].any(), "rays that need more than max_steps miss"
+    assert np.all(np.abs(image.steps[reached] - steps[reached]) <= 1)
+    # the hit lies within the threshold above the plane: the analytic
+    # intersection minus at most epsilon / slope
+    origin, directions = rays(s)
+    height = origin[2] + image.depth[reached] * directions[reached][:, 2]
+    assert np.all(height < render.epsilon * 1.0001) and np.all(height > -1e-5)
+    assert np.allclose(image.depth[reached], depth[reached], rtol=1e-4, atol=1e-5)
+
+
+# ---------------------------------------------------------- the camera inside a solid
+
+@pytest.mark.parametrize("name", ["inside_sphere_centre", "inside_mandelbulb"])
+def test_camera_inside_hits_everything_at_zero(name):
+    s = scene(name)
+    assert s.distance(np.array([s.checked.camera.position], dtype=float))[0] <= 0
+    image = rendered(name)
+    assert np.all(image.depth == 0) and np.all(image.steps == 1)
+    assert np.all(image.rgba[..., 3] == 1) and image.rgba[..., :3].max() < 20
+
+
+# ---------------------------------------------------------- fractal parameters at their edges
+
+EDGE_CASES = {
+    "power_2": ("mandelbulb", dict(power=2.0)),
+    "iterations_64": ("mandelbulb", dict(iterations=64)),
+    "bailout_1e6": ("mandelbulb", dict(bailout=1e6)),
+    "mandelbox_scale_minus_1_5": ("mandelbox", dict(scale=-1.5)),
+}
+
+
+@pytest.mark.parametrize("name", EDGE_CASES)
+def test_edge_parameters_match_the_numpy_sphere_tracer(name):
+    fractal, kwargs = EDGE_CASES[name]
+    s = scene(name)
+    render = s.checked.render
+    origin, directions = rays(s)
+    expected, _ = sphere_trace(lambda p: bounded_reference_de(fractal, p, **kwargs), origin, directions,
+                               render.epsilon, render.max_steps, render.max_distance)
+    image = rendered(name)
+    hit, expected_hit = np.isfinite(image.depth), np.isfinite(expected)
+    assert 0.1 < expected_hit.mean() < 0.9, "the view holds the fractal and the background"
+    assert np.mean(hit == expected_hit) >= 0.98
+    both = hit & expected_hit
+    difference = np.abs(image.depth[both] - expected[both])
+    assert np.median(difference) < render.epsilon and np.percentile(difference, 95) < 5 * render.epsilon
+
+
+def test_large_bailout_keeps_distances_finite_and_right_far_away():
+    # r^8 of a point at 1e6 is 1e48: past float's range before the bailout stops it
+    points = np.array([(1e6, 0, 0), (0, -3e5, 4e5), (2, 2, 2)])
+    for precision in PRECISIONS:
+        d = scene("bailout_1e6", precision).distance(points)
+        assert np.isfinite(d).all() and (d > 0).all()
+        # beyond its bound the fractal is the bounding sphere (radius 2^(1/7))
+        assert d[:2] == pytest.approx(np.linalg.norm(points[:2], axis=1) - 2 ** (1 / 7), rel=1e-6)
+
+
+# ---------------------------------------------------------- points a million units away
+
+FAR_SCENES = {
+    # name: (text, sphere centre)
+    "far camera": ("""scene sphere(1)
+        camera { position: (0, -1000000, 0), target: (0, 0, 0), fov: 0.0002 }
+        render { width: 48, height: 36, max_distance: 2000000 }""", (0.0, 0.0, 0.0)),
+    "far shape": ("""scene sphere(1).translate((1000000, 0, 0))
+        camera { position: (1000000, -4, 1), target: (1000000, 0, 0), fov: 40 }
+        render { width: 48, height: 36 }""", (1e6, 0.0, 0.0)),
+}
+ULP = {"float": float(np.finfo(np.float32).eps), "double": float(np.finfo(np.float64).eps)}
+
+
+@pytest.mark.parametrize("precision", PRECISIONS)
+@pytest.mark.parametrize("case", FAR_SCENES)
+def test_a_million_units_away(case, precision):
+    text, centre = FAR_SCENES[case]
+    s = fractalc.loads(text, precision=precision)
+    origin, directions = rays(s)
+    expected = ray_sphere(origin, directions, centre, 1.0)
+    image = s.render()
+    assert_finite_planes(image)
+    # distances at points 1e6 from the origin are |p - c| - R up to rounding
+    # of coordinates of 1e6
+    rng = np.random.default_rng(5)
+    points = np.asarray(centre) + rng.normal(size=(64, 3)) * 3
+    points = np.concatenate([points, rng.normal(size=(16, 3)) * 1e6])
+    exact = np.linalg.norm(points - centre, axis=1) - 1
+    scale = 1e6 * ULP[precision]             # the spacing of numbers near 1e6
+    assert np.allclose(s.distance(points), exact, rtol=4 * ULP[precision], atol=2 * scale)
+    hit, expected_hit = np.isfinite(image.depth), np.isfinite(expected)
+    both = hit & expected_hit
+    error = np.abs(image.depth[both] - expected[both])
+    threshold = expected[both] * pixel_angle(s)      # epsilon: pixel
+    silhouette = np.abs(hit.astype(int) - expected_hit.astype(int)).sum()
+    assert 0.2 < expected_hit.mean() < 0.8
+    if precision == "double":
+        assert silhouette <= 2
+        assert np.all(error <= threshold + 1e-6)
+    else:
+        # float keeps coordinates of 1e6 to 1/16: the sphere comes out
+        # rough, but in place
+        assert silhouette <= 0.1 * expected_hit.sum()
+        assert np.all(error <= threshold + 4 * scale)
