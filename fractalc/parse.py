@@ -184,7 +184,8 @@ def _syntax_message(error: UnexpectedInput) -> str:
         return "unexpected end of the file (an unclosed bracket?)"
     assert isinstance(error, UnexpectedToken)
     token, expected = error.token, set(error.expected)
-    if token.type == "NAME" and {"COMMA", "_NL"} & expected and "RBRACE" in expected:
+    if token.type == "NAME" and {"COMMA", "_NL"} & expected and "RBRACE" in expected \
+            and "NUMBER" not in expected:
         return f"missing ',' or new line before '{token}' (block entries are separated by commas or new lines)"
     if token.type == "$END":
         return f"unexpected end of the file, expected {_expected_words(expected)}"
