@@ -49,8 +49,7 @@ real julia_orbit(vec3 p, real cx, real cy, real cz, real cw, real slice, int ite
 
 //: fractal julia(c: vec4 = (-0.2, 0.6, 0.2, 0), slice: num = 0, iterations: int = 12 1..1000, bailout: num = 4 >0)
 real de_julia(vec3 p, real cx, real cy, real cz, real cw, real slice, int iterations, real bailout) {
-    orbit_trap unused = orbit_trap_start();
-    return julia_orbit(p, cx, cy, cz, cw, slice, iterations, bailout, &unused);
+    return julia_orbit(p, cx, cy, cz, cw, slice, iterations, bailout, 0);
 }
 
 // The orbit trap of the same iteration, for `.color(orbit_trap(...))`.

@@ -48,8 +48,7 @@ real mandelbox_orbit(vec3 p, real scale, real min_radius, real fixed_radius, rea
 
 //: fractal mandelbox(scale: num = 2, min_radius: num = 0.5 >0 <=fixed_radius, fixed_radius: num = 1 >0, fold_limit: num = 1 >0, iterations: int = 12 1..1000)
 real de_mandelbox(vec3 p, real scale, real min_radius, real fixed_radius, real fold_limit, int iterations) {
-    orbit_trap unused = orbit_trap_start();
-    return mandelbox_orbit(p, scale, min_radius, fixed_radius, fold_limit, iterations, &unused);
+    return mandelbox_orbit(p, scale, min_radius, fixed_radius, fold_limit, iterations, 0);
 }
 
 // The orbit trap of the same iteration, for `.color(orbit_trap(...))`.

@@ -93,8 +93,7 @@ real mandelbulb_orbit(vec3 p, real power, int iterations, real bailout, orbit_tr
 
 //: fractal mandelbulb(power: num = 8 1..32, iterations: int = 12 1..1000, bailout: num = 2 >0)
 real de_mandelbulb(vec3 p, real power, int iterations, real bailout) {
-    orbit_trap unused = orbit_trap_start();
-    return mandelbulb_orbit(p, power, iterations, bailout, &unused);
+    return mandelbulb_orbit(p, power, iterations, bailout, 0);
 }
 
 // The orbit trap of the same iteration, for `.color(orbit_trap(...))`.

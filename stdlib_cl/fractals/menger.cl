@@ -48,8 +48,7 @@ real menger_orbit(vec3 p, int level, orbit_trap *trap) {
 
 //: fractal menger(level: int = 4 0..10)
 real de_menger(vec3 p, int level) {
-    orbit_trap unused = orbit_trap_start();
-    return menger_orbit(p, level, &unused);
+    return menger_orbit(p, level, 0);
 }
 
 // The orbit trap of the same iteration, for `.color(orbit_trap(...))`.

@@ -10,8 +10,11 @@ orbit_trap orbit_trap_start(void) {
     return trap;
 }
 
-// Adds orbit point z for the lanes still iterating.
+// Adds orbit point z for the lanes still iterating. A DE alone passes no
+// trap (0): inlined with a constant 0, the updates vanish from its loop.
 void orbit_trap_add(orbit_trap *trap, vec3 z, mask active) {
+    if (trap == 0)
+        return;
     trap->origin = SELECT(trap->origin, min(trap->origin, v3_length(z)), active);
     trap->x = SELECT(trap->x, min(trap->x, fabs(z.x)), active);
     trap->y = SELECT(trap->y, min(trap->y, fabs(z.y)), active);

@@ -60,8 +60,7 @@ real sierpinski_orbit(vec3 p, int level, orbit_trap *trap) {
 
 //: fractal sierpinski(level: int = 6 0..10)
 real de_sierpinski(vec3 p, int level) {
-    orbit_trap unused = orbit_trap_start();
-    return sierpinski_orbit(p, level, &unused);
+    return sierpinski_orbit(p, level, 0);
 }
 
 // The orbit trap of the same iteration, for `.color(orbit_trap(...))`.
