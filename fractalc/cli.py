@@ -272,7 +272,7 @@ def _parser() -> argparse.ArgumentParser:
     bench_.add_argument("--height", type=int)
     bench_.add_argument("--resolution", help="1366x768, 1920x1080, 2560x1440, 3840x2160 (or 720p, 1080p, 1440p, 4k)")
     bench_.add_argument("--repeat", type=int, help="runs of the whole path; figures are medians (default 1); "
-                                                   "with --sweep, timed renders per row (default 3)")
+                                                   "with --sweep, timed renders per row (default 5)")
     bench_.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
     bench_.add_argument("--sweep", action="store_true",
                         help="speed against error: vary the quality knobs one at a time (and a few "

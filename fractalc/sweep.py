@@ -50,7 +50,7 @@ UNCOMBINED_KNOBS = ("precision", "samples")
 # REFERENCE_STEPS x its max_steps, in double precision.
 REFERENCE_EPSILON_SCALE = 0.1
 REFERENCE_STEPS = 4
-DEFAULT_REPEAT = 3
+DEFAULT_REPEAT = 5
 
 SCENE_LABEL = "scene settings"
 REFERENCE_LABEL = "reference"
@@ -68,7 +68,8 @@ def scene_settings(scene: Scene) -> dict:
 
 def reference_settings(settings: dict) -> dict:
     """The reference for `settings`: double, a tenth of the scene's hit
-    threshold, four times its steps, the same samples."""
+    threshold, four times its steps, plain sphere tracing, exact functions,
+    the same samples and normals."""
     return {**settings, "precision": "double",
             "epsilon_scale": settings["epsilon_scale"] * REFERENCE_EPSILON_SCALE,
             "max_steps": settings["max_steps"] * REFERENCE_STEPS,
@@ -84,9 +85,9 @@ def _text(value) -> str:
     return f"{value:g}" if isinstance(value, float) else str(value)
 
 
-def one_knob_changes(settings: dict, grid: dict = KNOB_GRID) -> list[dict]:
-    """Every value of every knob of `grid` other than the scene's, alone."""
-    return [{knob: value} for knob, values in grid.items() for value in values if value != settings[knob]]
+def one_knob_changes(settings: dict) -> list[dict]:
+    """Every value of every knob of KNOB_GRID other than the scene's, alone."""
+    return [{knob: value} for knob, values in KNOB_GRID.items() for value in values if value != settings[knob]]
 
 
 def parse_changes(items: list[str]) -> list[dict]:
@@ -159,6 +160,7 @@ class SweepResult:
     height: int
     repeat: int
     machine: dict
+    load_average: tuple[float, float]      # 1-minute load before and after the sweep
     rows: tuple[SweepRow, ...]
 
     def records(self) -> list[dict]:
@@ -193,14 +195,17 @@ def _time_rounds(scene: Scene, settings: list[dict], width: int, height: int, re
                  say: Callable[[str], None]) -> list[list[float]]:
     """Seconds of `repeat` renders of each settings, in rounds over all of
     them: a burst of load on the machine then spreads over the rows instead
-    of landing on one row's renders."""
+    of landing on one row's renders. Each round starts one row further on,
+    so no row always follows the same one (a render right after a long
+    one, the reference's, runs measurably slower here)."""
     seconds: list[list[float]] = [[] for _ in settings]
     for round_ in range(repeat):
         say(f"timing round {round_ + 1} of {repeat} ({len(settings)} renders)")
-        for times, keys in zip(seconds, settings):
+        for i in range(len(settings)):
+            row = (i + round_) % len(settings)
             start = time.perf_counter()
-            scene.render(width=width, height=height, **keys)
-            times.append(time.perf_counter() - start)
+            scene.render(width=width, height=height, **settings[row])
+            seconds[row].append(time.perf_counter() - start)
     return seconds
 
 
@@ -265,6 +270,7 @@ def sweep(scene: Scene, width: int | None = None, height: int | None = None,
     render = scene.checked.render
     width, height = width or render.width, height or render.height
     baseline = scene_settings(scene)
+    load_before = _load_average()
     say = progress or (lambda message: None)
 
     # the references first (one per samples value), so that each row's
@@ -303,7 +309,14 @@ def sweep(scene: Scene, width: int | None = None, height: int | None = None,
     front = pareto_front(rows)
     rows = [replace(row, pareto=i in front) for i, row in enumerate(rows)]
     return SweepResult(scene=scene.checked.file, width=width, height=height, repeat=repeat,
-                       machine=machine(scene), rows=tuple(rows))
+                       machine=machine(scene), load_average=(load_before, _load_average()), rows=tuple(rows))
+
+
+def _load_average() -> float:
+    try:
+        return os.getloadavg()[0]
+    except OSError:
+        return math.nan
 
 
 # ------------------------------------------------------------------ output
@@ -321,6 +334,8 @@ def table(result: SweepResult) -> str:
         ("colour error", "on sRGB (linear clipped to [0, 1]); PSNR = 20 log10(1 / RMSE)"),
         ("depth error", "|Z - Z_ref| on pixels both hit, scene units"),
         *machine_rows(result.machine),
+        ("load", f"1-minute load average {result.load_average[0]:.2f} before, {result.load_average[1]:.2f} "
+                 f"after (the sweep itself keeps the cores busy; more means other work shared them)"),
     ])
     columns = ("", "settings", "ms", "min ms", "steps", "hit mism.", "dZ median", "dZ p99",
                "RMSE", "PSNR dB")
@@ -390,8 +405,8 @@ def save_plot(result: SweepResult, path: str) -> None:
             axes.annotate(r.label, (r.render_ms_median, rmse(r)), textcoords="offset points",
                           xytext=(6, 4), fontsize=7, color=f"C{n}")
     scene_row = next(row for row in rows if row.label == SCENE_LABEL)
-    axes.scatter([scene_row.render_ms_median], [rmse(scene_row)], marker="*", s=180, color="k",
-                 label=SCENE_LABEL, zorder=4)
+    axes.scatter([scene_row.render_ms_median], [rmse(scene_row)], marker="*", s=240, facecolors="none",
+                 edgecolors="k", linewidths=1.2, label=SCENE_LABEL, zorder=4)
     for row in result.rows:
         if row.reference:
             axes.axvline(row.render_ms_median, color="0.4", linestyle="--", linewidth=1)
@@ -399,6 +414,13 @@ def save_plot(result: SweepResult, path: str) -> None:
                           xytext=(-4, -12), textcoords="offset points", ha="right", fontsize=7, color="0.3")
     axes.set_xscale("log")
     axes.set_yscale("log")
+    from matplotlib.ticker import FuncFormatter
+    # 300, not 3 x 10^2; times (a wide range) only at 1, 2, 3, 5 x 10^k
+    for axis, digits in ((axes.xaxis, (1, 2, 3, 5)), (axes.yaxis, range(1, 10))):
+        formatter = FuncFormatter(lambda value, _, digits=digits: f"{value:g}" if value > 0 and round(
+            value / 10 ** math.floor(math.log10(value))) in digits else "")
+        axis.set_major_formatter(formatter)
+        axis.set_minor_formatter(formatter)
     axes.set_xlabel("render time, median (ms)")
     axes.set_ylabel("colour RMSE against the reference (sRGB)")
     axes.set_title(f"{os.path.basename(result.scene)} {result.width}x{result.height}: time against error",
