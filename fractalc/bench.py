@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from .api import Scene
+from .paths import camera_at, params_at
 from .program import Camera
 
 RESOLUTIONS = {"1366x768": (1366, 768), "1920x1080": (1920, 1080), "2560x1440": (2560, 1440),
@@ -26,6 +27,7 @@ RESOLUTIONS = {"1366x768": (1366, 768), "1920x1080": (1920, 1080), "2560x1440": 
 @dataclass(frozen=True)
 class BenchResult:
     scene: str
+    path: str                 # "path" (the scene's) or "orbit"
     width: int
     height: int
     frames: int
@@ -113,6 +115,17 @@ def frame_statistics(frame_seconds: list[float]) -> dict[str, float]:
             "duration_seconds": sum(frame_seconds)}
 
 
+def bench_view(scene: Scene, frame: int, frames: int) -> tuple[Camera, dict[str, float]]:
+    """Camera and param values of a benchmark frame: along the scene's
+    `path` from its first keyframe to its last if it has one, else the
+    orbit of the camera about its target."""
+    path = scene.checked.path
+    if path is None:
+        return orbit_camera(scene.checked.camera, frame, frames), {}
+    t = path.start + (path.end - path.start) * frame / max(frames - 1, 1)
+    return camera_at(path, scene.checked.camera, t), params_at(path, t)
+
+
 def bench(scene: Scene, frames: int = 30, width: int | None = None, height: int | None = None,
           repeat: int = 1, use_cache: bool = True) -> BenchResult:
     """Render `frames` frames along the orbit, `repeat` times; figures are
@@ -126,14 +139,16 @@ def bench(scene: Scene, frames: int = 30, width: int | None = None, height: int 
     for _ in range(repeat):
         seconds = []
         for i in range(frames):
-            camera = orbit_camera(scene.checked.camera, i, frames)
+            camera, params = bench_view(scene, i, frames)
+            scene.set_params(params)
             start = time.perf_counter()
             scene.render(width=width, height=height, camera=camera)
             seconds.append(time.perf_counter() - start)
         runs.append(frame_statistics(seconds))
     medians = {key: statistics.median(run[key] for run in runs) for key in runs[0]}
     return BenchResult(
-        scene=scene.checked.file, width=width, height=height, frames=frames, repeat=repeat,
+        scene=scene.checked.file, path="path" if scene.checked.path else "orbit", width=width,
+        height=height, frames=frames, repeat=repeat,
         compile_seconds=compile_seconds, **medians, **machine(scene), precision=scene.precision,
         lanes=scene.device.lanes)
 
@@ -143,7 +158,7 @@ def table(result: BenchResult) -> str:
     rows = [
         ("scene", r.scene),
         ("resolution", f"{r.width}x{r.height}"),
-        ("frames", f"{r.frames} (orbit; medians of {r.repeat} run{'s' if r.repeat > 1 else ''})"),
+        ("frames", f"{r.frames} ({r.path}; medians of {r.repeat} run{'s' if r.repeat > 1 else ''})"),
         ("compile", f"{r.compile_seconds:.3f} s"),
         ("duration", f"{r.duration_seconds:.3f} s"),
         ("frame time", f"min {r.frame_ms_min:.1f} ms, avg {r.frame_ms_avg:.1f} ms, max {r.frame_ms_max:.1f} ms"),

@@ -80,3 +80,21 @@ def test_render_with_another_camera_does_not_rebuild():
     moved = scene.render(width=24, height=16, camera=orbit_camera(scene.checked.camera, 1, 4))
     assert build.statistics.builds == builds
     assert not (first.depth == moved.depth).all()
+
+
+def test_bench_follows_the_scenes_path_from_first_to_last_keyframe():
+    from fractalc.bench import bench_view
+    scene = fractalc.loads("""
+        param power = 8 in [2, 16]
+        scene mandelbulb(power: power)
+        path {
+            0: { position: (0, -4, 1), target: (0, 0, 0), power: 6 }
+            2: { position: (4, 0, 1), target: (0, 0, 0), power: 9 }
+        }
+    """)
+    first, first_params = bench_view(scene, 0, 5)
+    last, last_params = bench_view(scene, 4, 5)
+    assert first.position == pytest.approx((0, -4, 1)) and last.position == pytest.approx((4, 0, 1))
+    assert first_params == pytest.approx({"power": 6}) and last_params == pytest.approx({"power": 9})
+    middle, _ = bench_view(scene, 2, 5)
+    assert middle.position != pytest.approx(first.position)
