@@ -221,9 +221,11 @@ def _light_block(index: int, light: Light, bounded: bool) -> tuple[str, set[str]
     needs = set()
     if bounded and light.shadows != "none":
         # past the scene's bounding sphere nothing can block the light
+        # (two statements: C leaves the order of a call's arguments open)
         lines += ["        real enter, leave;",
-                  "        reach = SELECT(reach, fmin(reach, leave), "
-                  "ray_sphere_span(lifted, to_light, bound_centre, bound_radius, &enter, &leave));"]
+                  "        mask toward_bound = ray_sphere_span(lifted, to_light, bound_centre, bound_radius, "
+                  "&enter, &leave);",
+                  "        reach = SELECT(reach, fmin(reach, leave), toward_bound);"]
     if light.shadows == "hard":
         lines.append("        radiance = v3_scale(radiance, hard_shadow(lifted, to_light, reach, threshold, hit, params));")
         needs.add("hard_shadow")

@@ -51,6 +51,7 @@ UNCOMBINED_KNOBS = ("precision", "samples")
 REFERENCE_EPSILON_SCALE = 0.1
 REFERENCE_STEPS = 4
 DEFAULT_REPEAT = 5
+PRESELECTION_ROUNDS = 2       # timing rounds of the one-knob rows that pick the combinations
 
 SCENE_LABEL = "scene settings"
 REFERENCE_LABEL = "reference"
@@ -292,20 +293,23 @@ def sweep(scene: Scene, width: int | None = None, height: int | None = None,
         return _Prepared(label(change), settings, compile_seconds, float(np.mean(image.steps)),
                          compare(image, references[settings["samples"]][1]))
 
-    def measure(batch: list[_Prepared]) -> list[list[float]]:
-        return _time_rounds(scene, [p.settings for p in batch], width, height, repeat, say)
+    def measure(batch: list[_Prepared], rounds: int) -> list[list[float]]:
+        return _time_rounds(scene, [p.settings for p in batch], width, height, rounds, say)
 
     prepared = [prepare(change) for change in planned]
-    reference_rows = [r for r, _ in references.values()]
-    seconds = measure(prepared + reference_rows)
-    rows = [_row(p, s) for p, s in zip(prepared, seconds)]
-    reference_seconds = seconds[len(prepared):]
     if combine:
-        combined = [prepare(change) for change in promising_combinations(rows, rows[0])]
-        rows += [_row(p, s) for p, s in zip(combined, measure(combined))]
+        # a first, short timing of the one-knob rows picks the combinations;
+        # then every row is timed in the same rounds, so that all times
+        # share the machine's conditions
+        say("choosing combinations")
+        first = [_row(p, s) for p, s in zip(prepared, measure(prepared, PRESELECTION_ROUNDS))]
+        prepared += [prepare(change) for change in promising_combinations(first, first[0])]
+    reference_rows = [r for r, _ in references.values()]
     if len(references) == 1:
         reference_rows = [replace(reference_rows[0], label=REFERENCE_LABEL)]
-    rows += [_row(p, s, is_reference=True) for p, s in zip(reference_rows, reference_seconds)]
+    seconds = measure(prepared + reference_rows, repeat)
+    rows = [_row(p, s) for p, s in zip(prepared, seconds)]
+    rows += [_row(p, s, is_reference=True) for p, s in zip(reference_rows, seconds[len(prepared):])]
     front = pareto_front(rows)
     rows = [replace(row, pareto=i in front) for i, row in enumerate(rows)]
     return SweepResult(scene=scene.checked.file, width=width, height=height, repeat=repeat,

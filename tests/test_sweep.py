@@ -11,11 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import fractalc
 from fractalc import RenderError
 from fractalc.api import Image
-from fractalc.sweep import (CSV_COLUMNS, KNOB_GRID, KNOBS, REFERENCE_LABEL, SCENE_LABEL, ImageError, SweepRow,
-                            compare, one_knob_changes, pareto_front, promising_combinations,
-                            reference_settings, require_matplotlib)
+from fractalc.sweep import (CSV_COLUMNS, KNOB_GRID, KNOBS, PRESELECTION_ROUNDS, REFERENCE_LABEL, SCENE_LABEL,
+                            ImageError, SweepRow, compare, one_knob_changes, pareto_front,
+                            promising_combinations, reference_settings, require_matplotlib, sweep)
 
 REPO = Path(__file__).resolve().parents[1]
 MANDELBULB = REPO / "examples" / "mandelbulb.frac"
@@ -118,6 +119,20 @@ def test_usage_errors(tmp_path, args, mentions):
     result = fractalc_cli("bench", MANDELBULB, *args, cwd=tmp_path)
     assert result.returncode == 2 and mentions in result.stderr and "Traceback" not in result.stderr
     assert not list(tmp_path.iterdir())
+
+
+def test_combinations_are_timed_in_the_same_rounds_as_the_other_rows():
+    scene = fractalc.load(MANDELBULB)
+    messages = []
+    result = sweep(scene, width=16, height=12, repeat=2, changes=[{"epsilon_scale": 4.0}, {"overrelax": 1.3}],
+                   progress=messages.append)
+    labels = [row.label for row in result.rows]
+    assert labels[:3] == [SCENE_LABEL, "epsilon_scale=4", "overrelax=1.3"] and labels[-1] == REFERENCE_LABEL
+    for row in result.rows[3:-1]:          # combinations, if any: both knobs changed
+        assert row.settings["epsilon_scale"] == 4 and row.settings["overrelax"] == 1.3
+    rounds = [m for m in messages if m.startswith("timing round")]
+    assert "choosing combinations" in messages and len(rounds) == PRESELECTION_ROUNDS + 2
+    assert all(m.endswith(f"({len(result.rows)} renders)") for m in rounds[-2:])
 
 
 def test_missing_matplotlib_is_a_clear_error(monkeypatch):
