@@ -87,7 +87,8 @@ march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real 
         real d = distance_estimate(v3_add(origin, v3_scale(dir, r.t)), params);
         r.steps = r.steps + SELECT((real)0.0f, (real)1.0f, active);
 #if FEATURE_OVERRELAX
-        mask overshot = active & (omega > 1.0f) & (fabs(d) + previous_radius < step);
+        // a long step that lands inside a solid (d < 0) overshot too
+        mask overshot = active & (omega > 1.0f) & ((fabs(d) + previous_radius < step) | (d < 0.0f));
         if (ANY(overshot)) {
             // back to the previous point (its distance was previous_radius),
             // to step plainly from there
