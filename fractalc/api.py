@@ -59,6 +59,7 @@ class Scene:
             raise ValueError(f"precision must be 'float' or 'double', not {precision!r}")
         self.checked = replace(checked, render=replace(checked.render, precision=precision))
         self.device_spec = device
+        self._programs: dict = {}    # (compiled settings, lens, target) -> built program
         self.params = {p.name: p.default for p in checked.params}
         self.set_params(params or {})
 
@@ -124,8 +125,12 @@ class Scene:
         compiled = replace(settings, **{k: getattr(RenderSettings(), k) for k in _RUNTIME_KEYS})
         lens = Camera(aperture=1.0 if (camera or self.checked.camera).aperture > 0 else 0.0)
         target = self._target(settings)
+        key = (compiled, lens, target)
+        if use_cache and key in self._programs:
+            return self._programs[key], target   # no lowering or emitting per frame
         source = emit(lower(replace(self.checked, render=compiled, camera=lens)), target)
-        return build(source, self.device, use_cache=use_cache), target
+        self._programs[key] = build(source, self.device, use_cache=use_cache)
+        return self._programs[key], target
 
     def _settings(self, overrides: dict) -> RenderSettings:
         settings = self.checked.render

@@ -20,11 +20,6 @@ from .stdlib import COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signatu
 
 # The language's value types.
 NUM, SHAPE, MATERIAL, WORD, COLORING = "number", "shape", "material", "word", "coloring"
-NOT_YET = {
-    "fractal": {"mandelbulb", "julia", "mandelbox", "menger", "sierpinski"},
-}
-
-
 def vec_type(n: int) -> str:
     return f"vec{n}"
 
@@ -397,8 +392,6 @@ class _Checker:
             return Value(COLORING, Coloring(near, far, trap, scale))
         signature = self.library.signatures.get(name)
         if signature is None:
-            if name in NOT_YET["fractal"]:
-                self.fail(e.name_span, f"'{name}' is not supported yet")
             known = list(self.library.signatures) + list(COMBINATORS) + list(MATH) + list(COLORINGS)
             close = difflib.get_close_matches(name, known, n=1)
             hint = f" (did you mean '{close[0]}'?)" if close else ""
@@ -489,9 +482,6 @@ class _Checker:
                 self.error(entry.key_span, f"'{entry.key}' is given twice in '{owner}'")
                 continue
             spans[entry.key] = entry.key_span
-            if entry.key in NOT_YET.get(owner, ()):
-                self.error(entry.key_span, f"'{entry.key}' is not supported yet")
-                continue
             param = keys.get(entry.key)
             if param is None:
                 close = difflib.get_close_matches(entry.key, list(keys), n=1)

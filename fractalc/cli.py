@@ -232,17 +232,20 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--device", help="OpenCL device: index, name substring, 'cpu' or 'gpu' "
                                         "(see 'fractalc devices'; also $FRACTALC_DEVICE)")
 
+    def image_options(p):
+        p.add_argument("--width", type=int)
+        p.add_argument("--height", type=int)
+        p.add_argument("--samples", type=int, help="anti-aliasing samples per pixel")
+        p.add_argument("--seed", type=int, default=0, help="jitter seed for samples > 1")
+        p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+        device_options(p)
+
     render = commands.add_parser("render", help="render a scene to EXR or PNG",
                                  description="Render a scene. EXR: linear float with Z, normals and "
                                              "steps; PNG: sRGB 8-bit.")
     render.add_argument("scene")
     render.add_argument("-o", "--output", required=True, help="output image (.exr, .png, ...)")
-    render.add_argument("--width", type=int)
-    render.add_argument("--height", type=int)
-    render.add_argument("--samples", type=int, help="anti-aliasing samples per pixel")
-    render.add_argument("--seed", type=int, default=0, help="jitter seed for samples > 1")
-    render.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
-    device_options(render)
+    image_options(render)
     render.set_defaults(run=command_render)
 
     compile_ = commands.add_parser("compile", help="write the standalone OpenCL kernel",
@@ -316,12 +319,7 @@ def _parser() -> argparse.ArgumentParser:
     animate.add_argument("--fps", type=float, default=30.0, help="frames per second (default 30)")
     animate.add_argument("--mp4", metavar="FILE", help="also encode the frames as an MP4 (the 'mp4' extra)")
     animate.add_argument("--overwrite", action="store_true", help="render every frame, even those on disk")
-    animate.add_argument("--width", type=int)
-    animate.add_argument("--height", type=int)
-    animate.add_argument("--samples", type=int, help="anti-aliasing samples per pixel")
-    animate.add_argument("--seed", type=int, default=0, help="jitter seed for samples > 1 (the same each frame)")
-    animate.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
-    device_options(animate)
+    image_options(animate)
     animate.set_defaults(run=command_animate)
 
     devices = commands.add_parser("devices", help="list OpenCL devices")

@@ -38,7 +38,6 @@ class Signature:
     name: str
     parameters: tuple[Parameter, ...]
     function: str = ""             # the OpenCL function implementing it
-    variadic: bool = False         # combinators take any number of shapes first
 
 
 @dataclass(frozen=True)
@@ -194,9 +193,9 @@ def _p(name, type_, default=None, *constraints):
 
 
 COMBINATORS = {
-    "union": Signature("combinator", "union", (_p("smooth", "num", 0.0, ">=0"),), variadic=True),
-    "intersect": Signature("combinator", "intersect", (_p("smooth", "num", 0.0, ">=0"),), variadic=True),
-    "subtract": Signature("combinator", "subtract", (_p("smooth", "num", 0.0, ">=0"),), variadic=True),
+    "union": Signature("combinator", "union", (_p("smooth", "num", 0.0, ">=0"),)),
+    "intersect": Signature("combinator", "intersect", (_p("smooth", "num", 0.0, ">=0"),)),
+    "subtract": Signature("combinator", "subtract", (_p("smooth", "num", 0.0, ">=0"),)),
 }
 
 TRANSFORMS = {

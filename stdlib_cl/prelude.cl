@@ -5,7 +5,7 @@
 //   scalar   a uniform number (params, camera): float or double
 //   real     a number per ray: scalar, or a vector of LANES scalars
 //   mask     a per-ray truth value (comparison result): int, int8, long8, ...
-//   lane_int a per-ray integer of the mask's width (material ids, counters)
+//   lane_int a per-ray integer of the mask's width
 //   vec3     a point or direction per ray (three reals)
 #define CONCAT_(a, b) a##b
 #define CONCAT(a, b) CONCAT_(a, b)
