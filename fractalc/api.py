@@ -163,14 +163,14 @@ class Scene:
                           run.camera_block(camera))
         bar = run.terminal_progress(settings.width * settings.height) if progress else None
         try:
-            planes = run.render(program, self.device, frame, self._param_values(), target.lanes,
+            pixels = run.render(program, self.device, frame, self._param_values(), target.lanes,
                                 target.double, bar.update if bar else None)
         finally:
             if bar:
                 bar.close()
-        rgba = np.stack([planes[c] for c in "RGBA"], axis=-1)
-        normal = np.stack([planes[f"N.{c}"] for c in "xyz"], axis=-1)
-        return Image(rgba, planes["Z"], normal, planes["steps"], self._metadata(settings, camera))
+        # views of the kernel's pixels: no copies
+        return Image(pixels[..., 0:4], pixels[..., 4], pixels[..., 5:8], pixels[..., 8],
+                     self._metadata(settings, camera))
 
     def _metadata(self, settings: RenderSettings, camera: Camera) -> dict[str, str]:
         vector = lambda v: " ".join(f"{x:g}" for x in v)  # noqa: E731

@@ -99,6 +99,13 @@ class Device:
         """Rays per work-item: vector lanes on CPUs, one ray per item on GPUs."""
         return 1 if self.info.kind == "GPU" else 16
 
+    @property
+    def work_group(self) -> tuple[int, int] | None:
+        """Work-group size of render launches: the driver's choice on GPUs;
+        on CPUs small groups of 8 x 1 blocks, which PoCL spreads over its
+        threads more evenly than its own choice (docs/performance.md)."""
+        return None if self.info.kind == "GPU" else (8, 1)
+
 
 @lru_cache(maxsize=None)
 def open_device(spec: str | None = None) -> Device:

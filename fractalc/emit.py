@@ -226,12 +226,16 @@ def _light_block(index: int, light: Light, bounded: bool) -> tuple[str, set[str]
                   "        mask toward_bound = ray_sphere_span(lifted, to_light, bound_centre, bound_radius, "
                   "&enter, &leave);",
                   "        reach = SELECT(reach, fmin(reach, leave), toward_bound);"]
+    if light.shadows != "none":
+        # a surface facing away from the light gets none of it (blinn_phong
+        # is 0 there): no shadow ray
+        lines.append("        mask facing = hit & (v3_dot(normal, to_light) > 0.0f);")
     if light.shadows == "hard":
-        lines.append("        radiance = v3_scale(radiance, hard_shadow(lifted, to_light, reach, threshold, hit, params));")
+        lines.append("        radiance = v3_scale(radiance, hard_shadow(lifted, to_light, reach, threshold, facing, params));")
         needs.add("hard_shadow")
     elif light.shadows == "soft":
         lines.append(f"        radiance = v3_scale(radiance, soft_shadow(lifted, to_light, reach, threshold, "
-                     f"{literal(light.softness)}, hit, params));")
+                     f"{literal(light.softness)}, facing, params));")
         needs.add("soft_shadow")
     lines += ["        color = v3_add(color, blinn_phong(normal, to_light, to_eye, albedo, s.specular, "
               "s.shininess, radiance));", "    }"]
@@ -380,17 +384,18 @@ _HEADER = """\
 // Kernels (build with no options; `real` is {real} here, LANES = {lanes} rays
 // per work-item):
 //   render(__global float *out, __constant {scalar} *params, __constant {scalar} *camera,
-//          int width, int height, int x0, int y0, int pitch, int tile_height,
+//          int width, int height, int x0, int y0, int pitch, int rows,
 //          int samples, uint seed)
-//     Renders the tile of tile_height rows starting at pixel (x0, y0) of a
-//     width x height image. A work-item renders a block of LANES_X x LANES_Y
-//     pixels ({block}); global size (pitch / LANES_X, tile_height / LANES_Y),
-//     where pitch and tile_height are the tile's width and height rounded up
-//     to multiples of LANES_X and LANES_Y. `out` gets 9 planes of
-//     pitch * tile_height floats: R G B A Z N.x N.y N.z steps (linear
-//     colour; Z = +inf where the ray missed), each stored block by block:
-//     block (bx, by) at (by * pitch / LANES_X + bx) * LANES, its pixels
-//     row-major within it.
+//     Renders pixels of a width x height image into `out`: rows of pitch
+//     pixels of 9 floats, R G B A Z N.x N.y N.z steps (linear colour; Z =
+//     +inf where the ray missed), pixel (x, y) at (y * pitch + x) * 9,
+//     for rows >= height rows, where pitch >= width and rows are multiples
+//     of LANES_X and LANES_Y (blocks past the image's edge write there). A
+//     work-item renders a block of LANES_X x LANES_Y pixels ({block}): the
+//     block at (x0 + LANES_X * i, y0 + LANES_Y * j) for global id (i, j).
+//     One launch of global size (pitch / LANES_X, rows / LANES_Y) at x0 =
+//     y0 = 0 renders the image; launches over parts of it (tiles: x0, y0
+//     multiples of the block) fill those parts.
 //     camera: 15 values: position xyz, forward xyz, right xyz, up xyz (the
 //     orthonormal frame of LANGUAGE.md's camera model), tan(fov / 2), lens
 //     aperture (diameter) and focus distance (the last two are read only by

@@ -1,13 +1,15 @@
 """Stage 6: run a built program (`render`, `distances`).
 
-The image is rendered in tiles: no single launch covers a large frame (GPU
-watchdogs), host memory besides the output stays O(tile), and progress is
-reported per tile.
+The image is rendered in tiles, each launched while the ones before it still
+run (the device never waits for the host): no single launch covers a large
+frame (GPU watchdogs), and progress is reported per tile. The kernel writes
+every pixel in place into one image-sized buffer, read back once.
 """
 from __future__ import annotations
 
 import math
 import sys
+from collections import deque
 from dataclasses import dataclass
 from typing import Callable
 
@@ -18,8 +20,10 @@ from .emit import lane_block
 from .errors import RenderError
 from .program import Camera
 
-PLANES = ("R", "G", "B", "A", "Z", "N.x", "N.y", "N.z", "steps")
-TILE_WIDTH, TILE_HEIGHT = 256, 64
+CHANNELS = ("R", "G", "B", "A", "Z", "N.x", "N.y", "N.z", "steps")   # of a pixel, as in the kernel
+# Tiles: launches of at most this many pixels (GPU watchdogs; progress).
+TILE_WIDTH, TILE_HEIGHT = 1024, 64
+TILES_IN_FLIGHT = 3
 
 
 @dataclass(frozen=True)
@@ -79,38 +83,45 @@ def _guard(action: str):
 
 
 def render(program, device: Device, frame: Frame, params, lanes: int, double: bool,
-           progress: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
-    """Render `frame`; returns one (H, W) float32 array per plane name."""
+           progress: Callable[[int], None] | None = None) -> np.ndarray:
+    """Render `frame`: an (H, W, 9) float32 array of CHANNELS per pixel."""
     import pyopencl as cl
     width, height = frame.width, frame.height
-    planes = {name: np.empty((height, width), dtype=np.float32) for name in PLANES}
     kernel = cl.Kernel(program, "render")
     block_width, block_height = lane_block(lanes)
+    group = device.work_group
+    step_x, step_y = (block_width * group[0], block_height * group[1]) if group else (block_width, block_height)
+    pitch, rows = _round_up(width, step_x), _round_up(height, step_y)
+    tile_width, tile_height = _round_up(min(TILE_WIDTH, pitch), step_x), _round_up(min(TILE_HEIGHT, rows), step_y)
+    image = np.empty((rows, pitch, len(CHANNELS)), dtype=np.float32)
     with _guard("rendering"):
         params_buffer = _constant_buffer(device, params, double)
         camera_buffer = _constant_buffer(device, frame.camera, double)
-        tile_pitch = _round_up(min(TILE_WIDTH, width), block_width)
-        tile_rows = _round_up(min(TILE_HEIGHT, height), block_height)
-        out = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY, len(PLANES) * tile_rows * tile_pitch * 4)
-        for y0 in range(0, height, tile_rows):
-            rows = min(tile_rows, height - y0)
-            padded_rows = _round_up(rows, block_height)
-            for x0 in range(0, width, tile_pitch):
-                columns = min(tile_pitch, width - x0)
-                pitch = _round_up(columns, block_width)
-                kernel(device.queue, (pitch // block_width, padded_rows // block_height), None, out,
-                       params_buffer, camera_buffer, np.int32(width), np.int32(height), np.int32(x0),
-                       np.int32(y0), np.int32(pitch), np.int32(padded_rows), np.int32(frame.samples),
-                       np.uint32(frame.seed))
-                blocks = np.empty((len(PLANES), padded_rows // block_height, pitch // block_width,
-                                   block_height, block_width), dtype=np.float32)
-                cl.enqueue_copy(device.queue, blocks, out)
-                tile = blocks.transpose(0, 1, 3, 2, 4).reshape(len(PLANES), padded_rows, pitch)
-                for plane, name in zip(tile, PLANES):
-                    planes[name][y0:y0 + rows, x0:x0 + columns] = plane[:rows, :columns]
-                if progress:
-                    progress(rows * columns)
-    return planes
+        out = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY, image.nbytes)
+        queued = deque()    # (launch event, pixels) of the tiles in flight
+        for y0 in range(0, rows, tile_height):
+            for x0 in range(0, pitch, tile_width):
+                columns, lines = min(tile_width, pitch - x0), min(tile_height, rows - y0)
+                event = kernel(device.queue, (columns // block_width, lines // block_height), group, out,
+                               params_buffer, camera_buffer, np.int32(width), np.int32(height),
+                               np.int32(x0), np.int32(y0), np.int32(pitch), np.int32(rows),
+                               np.int32(frame.samples), np.uint32(frame.seed))
+                queued.append((event, max(0, min(columns, width - x0)) * max(0, min(lines, height - y0))))
+                # a few tiles ahead keep the device busy while we report
+                # progress, and an interrupt waits for those few only
+                while len(queued) > TILES_IN_FLIGHT:
+                    _finish(queued.popleft(), progress)
+        while queued:
+            _finish(queued.popleft(), progress)
+        cl.enqueue_copy(device.queue, image, out)
+    return image[:height, :width]
+
+
+def _finish(tile, progress: Callable[[int], None] | None) -> None:
+    event, pixels = tile
+    event.wait()
+    if progress:
+        progress(pixels)
 
 
 def _round_up(n: int, multiple: int) -> int:

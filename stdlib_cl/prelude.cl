@@ -37,6 +37,7 @@ typedef uint lane_uint;
 #define TO_UINT(x) ((uint)(x))
 #define LOAD_LANES(i, ptr) ((ptr)[i])
 #define STORE_LANES(v, i, ptr) ((ptr)[i] = (v))
+typedef float lane_float;
 #else
 #define REAL_TYPE CONCAT(SCALAR_NAME, LANES)
 typedef REAL_TYPE real;
@@ -52,6 +53,7 @@ typedef CONCAT(uint, LANES) lane_uint;
 #define TO_UINT(x) CONCAT(convert_uint, LANES)(x)
 #define LOAD_LANES(i, ptr) CONCAT(vload, LANES)((i), (ptr))
 #define STORE_LANES(v, i, ptr) CONCAT(vstore, LANES)((v), (i), (ptr))
+typedef CONCAT(float, LANES) lane_float;
 #endif
 
 #if FAST_MATH

@@ -20,17 +20,17 @@
 #define CAMERA_FOCUS 14         // distance of the plane in focus, along forward
 #define CAMERA_SIZE 15
 
-// Output planes, each `pitch * tile_height` floats.
-#define PLANE_R 0
-#define PLANE_G 1
-#define PLANE_B 2
-#define PLANE_A 3
-#define PLANE_Z 4
-#define PLANE_NX 5
-#define PLANE_NY 6
-#define PLANE_NZ 7
-#define PLANE_STEPS 8
-#define PLANE_COUNT 9
+// Output channels of a pixel, in the EXR's order.
+#define CHANNEL_R 0
+#define CHANNEL_G 1
+#define CHANNEL_B 2
+#define CHANNEL_A 3
+#define CHANNEL_Z 4
+#define CHANNEL_NX 5
+#define CHANNEL_NY 6
+#define CHANNEL_NZ 7
+#define CHANNEL_STEPS 8
+#define CHANNELS 9
 
 // Hart's clarity function: the hit threshold grows with t by the angle one
 // pixel subtends, or stays the scene's constant epsilon.
@@ -164,6 +164,20 @@ real unit_random(lane_uint v) {
     return TO_REAL(hash_lanes(v) >> 8) * (1.0f / 16777216.0f);
 }
 
+// Stores one value per lane into `channel` of the block's pixels, `block`
+// pointing at its top-left pixel in an image of rows of `pitch` pixels of
+// CHANNELS floats (lane i is pixel (i % LANES_X, i / LANES_X) of the block).
+void store_channel(lane_float v, int channel, __global float *block, int pitch) {
+#if LANES == 1
+    block[channel] = v;
+#else
+    float lanes[LANES];
+    STORE_LANES(v, 0, lanes);
+    for (int i = 0; i < LANES; i++)
+        block[((i / LANES_X) * pitch + i % LANES_X) * CHANNELS + channel] = lanes[i];
+#endif
+}
+
 // The surface normal where a march hit (0 elsewhere).
 vec3 hit_normal(vec3 origin, vec3 dir, march_result m, scalar pixel_angle, __constant scalar *params) {
     vec3 normal = v3((real)0.0f, 0.0f, 0.0f);
@@ -289,19 +303,21 @@ vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixe
     return color;
 }
 
-// Renders one tile. Work-item (gx, gy) covers a block of LANES_X x LANES_Y
-// pixels (compact blocks keep a work-item's rays alike, so its lanes
-// diverge less than a row of LANES would). `out`: PLANE_COUNT planes of
-// pitch * tile_height floats (R G B A Z N.x N.y N.z steps), each stored
-// block by block: block (gx, gy) at (gy * pitch / LANES_X + gx) * LANES,
-// its pixels row-major within it. pitch and tile_height are the tile's size
-// rounded up to multiples of LANES_X and LANES_Y.
+// Renders one tile. Work-item (gx, gy) covers the block of LANES_X x LANES_Y
+// pixels whose top-left pixel is (x0 + gx * LANES_X, y0 + gy * LANES_Y)
+// (compact blocks keep a work-item's rays alike, so its lanes diverge less
+// than a row of LANES would). `out`: the whole image, whatever the tile:
+// rows of `pitch` pixels of CHANNELS floats (R G B A Z N.x N.y N.z steps),
+// pixel (x, y) at (y * pitch + x) * CHANNELS; pitch and rows are at least
+// the image's width and height, multiples of LANES_X and LANES_Y (blocks
+// past the image's edge write there).
 __kernel void render(__global float *out, __constant scalar *params,
                      __constant scalar *camera, int width, int height,
-                     int x0, int y0, int pitch, int tile_height, int samples, uint seed) {
+                     int x0, int y0, int pitch, int rows, int samples, uint seed) {
     int gx = get_global_id(0), gy = get_global_id(1);
-    real px = (real)(x0 + gx * LANES_X) + LANE_X;
-    real py = (real)(y0 + gy * LANES_Y) + LANE_Y;
+    int block_x = x0 + gx * LANES_X, block_y = y0 + gy * LANES_Y;
+    real px = (real)block_x + LANE_X;
+    real py = (real)block_y + LANE_Y;
     mask inside = (px < (real)width) & (py < (real)height);
     scalar pixel_angle = 2.0f * camera[CAMERA_TAN_HALF_FOV] / (scalar)height;
     vec3 origin = v3(camera[CAMERA_POSITION], camera[CAMERA_POSITION + 1], camera[CAMERA_POSITION + 2]);
@@ -348,18 +364,17 @@ __kernel void render(__global float *out, __constant scalar *params,
         color = v3_scale(color, (real)(1.0f / (scalar)samples));
     }
 
-    __global float *pixel = out + (gy * (pitch / LANES_X) + gx) * LANES;
-    int plane = pitch * tile_height;
+    __global float *block = out + (block_y * pitch + block_x) * CHANNELS;
     real depth = SELECT((real)INFINITY, centre.t, centre.hit);
-    STORE_LANES(TO_FLOAT(color.x), 0, pixel + PLANE_R * plane);
-    STORE_LANES(TO_FLOAT(color.y), 0, pixel + PLANE_G * plane);
-    STORE_LANES(TO_FLOAT(color.z), 0, pixel + PLANE_B * plane);
-    STORE_LANES(TO_FLOAT((real)1.0f), 0, pixel + PLANE_A * plane);
-    STORE_LANES(TO_FLOAT(depth), 0, pixel + PLANE_Z * plane);
-    STORE_LANES(TO_FLOAT(normal.x), 0, pixel + PLANE_NX * plane);
-    STORE_LANES(TO_FLOAT(normal.y), 0, pixel + PLANE_NY * plane);
-    STORE_LANES(TO_FLOAT(normal.z), 0, pixel + PLANE_NZ * plane);
-    STORE_LANES(TO_FLOAT(centre.steps), 0, pixel + PLANE_STEPS * plane);
+    store_channel(TO_FLOAT(color.x), CHANNEL_R, block, pitch);
+    store_channel(TO_FLOAT(color.y), CHANNEL_G, block, pitch);
+    store_channel(TO_FLOAT(color.z), CHANNEL_B, block, pitch);
+    store_channel(TO_FLOAT((real)1.0f), CHANNEL_A, block, pitch);
+    store_channel(TO_FLOAT(depth), CHANNEL_Z, block, pitch);
+    store_channel(TO_FLOAT(normal.x), CHANNEL_NX, block, pitch);
+    store_channel(TO_FLOAT(normal.y), CHANNEL_NY, block, pitch);
+    store_channel(TO_FLOAT(normal.z), CHANNEL_NZ, block, pitch);
+    store_channel(TO_FLOAT(centre.steps), CHANNEL_STEPS, block, pitch);
 }
 
 // Distance estimates at points: `points` holds count x's, then count y's,

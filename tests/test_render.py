@@ -338,7 +338,9 @@ def test_lanes_agree_with_eight(lanes):
     planes = {}
     for n in (8, lanes):
         program, device = _built(scene, n)
-        planes[n] = run_module.render(program, device, frame, params, n, False)
+        pixels = run_module.render(program, device, frame, params, n, False)
+        assert pixels.shape == (height, width, len(run_module.CHANNELS))
+        planes[n] = dict(zip(run_module.CHANNELS, np.moveaxis(pixels, -1, 0)))
     a, b = planes[8], planes[lanes]
     hits = np.isfinite(a["Z"]) & np.isfinite(b["Z"])
     assert (np.isfinite(a["Z"]) != np.isfinite(b["Z"])).sum() <= 2
@@ -537,7 +539,7 @@ STANDALONE_RUNNER = textwrap.dedent("""\
     width, height = spec["width"], spec["height"]
     pitch = -(-width // block_x) * block_x
     rows = -(-height // block_y) * block_y
-    out = np.empty((9, rows // block_y, pitch // block_x, block_y, block_x), dtype=np.float32)
+    out = np.empty((rows, pitch, 9), dtype=np.float32)
     mf = cl.mem_flags
     out_buffer = cl.Buffer(context, mf.WRITE_ONLY, out.nbytes)
     params_buffer = cl.Buffer(context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=params)
@@ -548,9 +550,8 @@ STANDALONE_RUNNER = textwrap.dedent("""\
     cl.enqueue_copy(queue, out, out_buffer)
     queue.finish()
     assert "fractalc" not in sys.modules
-    # planes are stored block by block: back to rows of pixels
-    image = out.transpose(0, 1, 3, 2, 4).reshape(9, rows, pitch)
-    np.save(out_path, image[:, :height, :width])
+    # pixel by pixel, 9 channels each: one plane per channel
+    np.save(out_path, out[:height, :width].transpose(2, 0, 1))
     """)
 
 
