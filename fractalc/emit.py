@@ -281,6 +281,7 @@ def features(render, camera, surface, bounded: bool) -> dict[str, bool]:
     """The template's optional effects, on where the scene uses them."""
     transparent = not (ir.is_const(surface.transparency) and surface.transparency.value == 0)
     glow = render.glow is not None and render.glow.strength > 0
+    step_ao = render.ao > 0 and render.ao_method == "steps"
     return {
         "GLOW": glow,
         "FOG": render.fog is not None and render.fog.density > 0,
@@ -288,7 +289,9 @@ def features(render, camera, surface, bounded: bool) -> dict[str, bool]:
         "REFLECTIONS": render.reflections > 0,
         "DEPTH_OF_FIELD": camera.aperture > 0,
         "TRANSPARENCY": transparent,
-        "OVERRELAX": render.overrelax > 1,
+        # glow and step-count AO show the plain march (its closest approach,
+        # its steps), which longer steps would skip through
+        "OVERRELAX": render.overrelax > 1 and not glow and not step_ao,
         # glow needs every miss's closest approach, so misses must be marched
         "SCENE_BOUND": bounded and not glow,
     }

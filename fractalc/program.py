@@ -145,7 +145,7 @@ class RenderSettings:
     slice: Slice | None = None
     ao_method: str = "normal"        # normal: sample along the normal; steps: from the step count
     dither: float = 1.0              # random fraction of the first step, against banding
-    overrelax: float = 1.0           # over-relaxation factor of sphere tracing (1 = plain)
+    overrelax: float = 1.3           # over-relaxation factor of sphere tracing (1 = plain)
     epsilon_scale: float = 1.0       # multiplies the hit threshold (a quality knob)
     normals: str = "tetrahedral"     # finite differences: tetrahedral (4 evaluations) or central (6)
     fast_math: str = "off"           # on: native_ transcendental functions

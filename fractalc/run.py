@@ -97,7 +97,9 @@ def render(program, device: Device, frame: Frame, params, lanes: int, double: bo
     with _guard("rendering"):
         params_buffer = _constant_buffer(device, params, double)
         camera_buffer = _constant_buffer(device, frame.camera, double)
-        out = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY, image.nbytes)
+        # the kernel writes into `image` itself where the device can (CPUs):
+        # no copy; mapping it at the end makes its contents current anywhere
+        out = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=image)
         queued = deque()    # (launch event, pixels) of the tiles in flight
         for y0 in range(0, rows, tile_height):
             for x0 in range(0, pitch, tile_width):
@@ -113,7 +115,9 @@ def render(program, device: Device, frame: Frame, params, lanes: int, double: bo
                     _finish(queued.popleft(), progress)
         while queued:
             _finish(queued.popleft(), progress)
-        cl.enqueue_copy(device.queue, image, out)
+        mapped, _ = cl.enqueue_map_buffer(device.queue, out, cl.map_flags.READ, 0, image.shape,
+                                          image.dtype, is_blocking=True)
+        mapped.base.release(device.queue)
     return image[:height, :width]
 
 

@@ -764,9 +764,9 @@ ALL_MARKERS = [(name, marker) for name, entry in EFFECTS.items() for marker in e
 
 
 def _source(scene=PLAIN_SCENE, decls="", keys=None) -> str:
-    """The kernel of a scene with dithering off (it is on by default) plus
-    the given declarations and render keys."""
-    render_keys = {"dither": "0", **(keys or {})}
+    """The kernel of a scene with dithering and over-relaxation off (both
+    are on by default) plus the given declarations and render keys."""
+    render_keys = {"dither": "0", "overrelax": "1", **(keys or {})}
     block = "render { " + ", ".join(f"{k}: {v}" for k, v in render_keys.items()) + " }"
     return fractalc.loads("\n".join([scene, decls, block])).kernel_source(lanes=8)
 
@@ -829,3 +829,11 @@ def test_every_example_in_the_effects_page_checks():
     assert len(blocks) >= 10
     for block in blocks:
         fractalc.loads(block, path="docs/effects.md")
+
+
+def test_glow_and_step_count_ao_march_plainly():
+    """Both show the plain march (its closest approach, its step count):
+    their kernels do not over-relax, whatever `overrelax` says."""
+    assert re.search(r"#define OVERRELAX\b", _source(keys={"overrelax": "1.3"}))
+    for keys in ({"glow": "{ strength: 0.5 }"}, {"ao": "0.5", "ao_method": "steps"}):
+        assert not re.search(r"#define OVERRELAX\b", _source(keys={**keys, "overrelax": "1.3"})), keys

@@ -16,6 +16,7 @@ import pytest
 
 import fractalc
 import reference_fractals as ref
+from fractalc.program import RenderSettings
 from fractalc.sweep import compare
 from test_effects import ray_sphere
 from test_fractals import bounded_reference_de, primary_rays, sphere_trace
@@ -98,26 +99,31 @@ def test_camera_a_hair_from_the_mandelbulb_sees_its_surface_at_that_distance():
 
 # ---------------------------------------------------------- grazing rays along a plane
 
-def grazing_prediction(s):
+def grazing_prediction(s, overrelax):
     """For each pixel ray from height h towards the plane z = 0 at slope
-    -dir.z, the march of LANGUAGE.md with a fixed threshold e: its height
-    after k steps is h (1 - slope)^k, it hits at the first height below e,
-    taking k + 1 distance evaluations, at t = (h - height) / slope."""
+    -dir.z, the march of LANGUAGE.md with a fixed threshold e and steps of
+    w = overrelax times the distance: its height after k steps is
+    h (1 - w slope)^k, it hits at the first height below e, taking k + 1
+    distance evaluations, at t = (h - height) / slope. (Over-relaxation
+    falls back to plain steps only when w slope > 2 - w, steeper than any
+    ray here.)"""
     origin, directions = rays(s)
     h, epsilon = origin[2], s.checked.render.epsilon
     slope = -directions[..., 2]
+    assert overrelax * slope.max() < 2 - overrelax
     with np.errstate(divide="ignore", invalid="ignore"):
-        k = np.ceil(np.log(epsilon / h) / np.log1p(-slope))
+        k = np.ceil(np.log(epsilon / h) / np.log1p(-overrelax * slope))
     k = np.where(slope > 0, k, np.inf)
-    t = (h - h * (1 - slope) ** k) / np.where(slope > 0, slope, 1)
+    t = (h - h * (1 - overrelax * slope) ** k) / np.where(slope > 0, slope, 1)
     return slope, k + 1, np.where(slope > 0, t, np.inf)
 
 
+@pytest.mark.parametrize("overrelax", [1.0, RenderSettings().overrelax])
 @pytest.mark.parametrize("precision", PRECISIONS)
-def test_grazing_rays_hit_the_plane_where_the_march_predicts(precision):
+def test_grazing_rays_hit_the_plane_where_the_march_predicts(precision, overrelax):
     s = scene("grazing_plane", precision)
-    image = rendered("grazing_plane", precision)
-    slope, steps, depth = grazing_prediction(s)
+    image = s.render(overrelax=overrelax)
+    slope, steps, depth = grazing_prediction(s, overrelax)
     render = s.checked.render
     reached = (steps <= render.max_steps - 1) & (depth < render.max_distance)
     out_of_steps = (slope > 0) & (steps >= render.max_steps + 2)
