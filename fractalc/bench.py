@@ -27,7 +27,7 @@ RESOLUTIONS = {"1366x768": (1366, 768), "1920x1080": (1920, 1080), "2560x1440": 
 @dataclass(frozen=True)
 class BenchResult:
     scene: str
-    path: str                 # "path" (the scene's) or "orbit"
+    path: str                 # "path" (the scene's), "orbit" or "still" (the file's view)
     width: int
     height: int
     frames: int
@@ -115,11 +115,13 @@ def frame_statistics(frame_seconds: list[float]) -> dict[str, float]:
             "duration_seconds": sum(frame_seconds)}
 
 
-def bench_view(scene: Scene, frame: int, frames: int) -> tuple[Camera, dict[str, float]]:
-    """Camera and param values of a benchmark frame: along the scene's
-    `path` from its first keyframe to its last if it has one, else the
-    orbit of the camera about its target."""
+def bench_view(scene: Scene, frame: int, frames: int, still: bool = False) -> tuple[Camera, dict[str, float]]:
+    """Camera and param values of a benchmark frame: the file's own view
+    if `still`, else along the scene's `path` from its first keyframe to
+    its last if it has one, else the orbit of the camera about its target."""
     path = scene.checked.path
+    if still:
+        return scene.checked.camera, {}
     if path is None:
         return orbit_camera(scene.checked.camera, frame, frames), {}
     t = path.start + (path.end - path.start) * frame / max(frames - 1, 1)
@@ -127,16 +129,16 @@ def bench_view(scene: Scene, frame: int, frames: int) -> tuple[Camera, dict[str,
 
 
 def bench(scene: Scene, frames: int = 30, width: int | None = None, height: int | None = None,
-          repeat: int = 1, use_cache: bool = True) -> BenchResult:
-    """Render `frames` frames along the orbit, `repeat` times; figures are
-    medians over the repeats."""
+          repeat: int = 1, use_cache: bool = True, still: bool = False) -> BenchResult:
+    """Render `frames` frames along the path or orbit (or of the file's
+    view, `still`), `repeat` times; figures are medians over the repeats."""
     settings = scene.checked.render
     width, height = width or settings.width, height or settings.height
     # compile time: the build and the first launch, where PoCL generates
     # the machine code for the work-group size (not part of any frame)
     start = time.perf_counter()
     scene.compile(use_cache=use_cache)
-    camera, params = bench_view(scene, 0, frames)
+    camera, params = bench_view(scene, 0, frames, still)
     scene.set_params(params)
     scene.render(width=width, height=height, camera=camera)
     compile_seconds = time.perf_counter() - start
@@ -144,7 +146,7 @@ def bench(scene: Scene, frames: int = 30, width: int | None = None, height: int 
     for _ in range(repeat):
         seconds = []
         for i in range(frames):
-            camera, params = bench_view(scene, i, frames)
+            camera, params = bench_view(scene, i, frames, still)
             scene.set_params(params)
             start = time.perf_counter()
             scene.render(width=width, height=height, camera=camera)
@@ -152,7 +154,8 @@ def bench(scene: Scene, frames: int = 30, width: int | None = None, height: int 
         runs.append(frame_statistics(seconds))
     medians = {key: statistics.median(run[key] for run in runs) for key in runs[0]}
     return BenchResult(
-        scene=scene.checked.file, path="path" if scene.checked.path else "orbit", width=width,
+        scene=scene.checked.file, path="still" if still else "path" if scene.checked.path else "orbit",
+        width=width,
         height=height, frames=frames, repeat=repeat,
         compile_seconds=compile_seconds, **medians, **machine(scene), precision=scene.precision,
         lanes=scene.device.lanes)

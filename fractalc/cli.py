@@ -128,12 +128,14 @@ def command_bench(args) -> int:
                 raise UsageError(f"{name} goes with --sweep")
         scene = _load(args)
         result = bench(scene, frames=args.frames, width=width, height=height, repeat=args.repeat or 1,
-                       use_cache=not args.no_cache)
+                       use_cache=not args.no_cache, still=args.still)
         print(table(result))
         if args.json:
             _write_text_atomically(args.json, json.dumps(result.as_dict(), indent=2) + "\n")
         return 0
     from . import sweep
+    if args.still:
+        raise UsageError("--still is for the frame benchmark; --sweep renders the file's view already")
     if args.json:
         raise UsageError("--json is for the orbit benchmark; --sweep writes --csv FILE")
     if args.plot and not args.plot.lower().endswith(".png"):
@@ -277,6 +279,8 @@ def _parser() -> argparse.ArgumentParser:
     bench_.add_argument("--repeat", type=int, help="runs of the whole path; figures are medians (default 1); "
                                                    "with --sweep, timed renders per row (default 5)")
     bench_.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
+    bench_.add_argument("--still", action="store_true",
+                        help="render the file's own camera view every frame (no path, no orbit)")
     bench_.add_argument("--sweep", action="store_true",
                         help="speed against error: vary the quality knobs one at a time (and a few "
                              "combinations) and compare each render with a reference render")

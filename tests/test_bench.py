@@ -98,3 +98,20 @@ def test_bench_follows_the_scenes_path_from_first_to_last_keyframe():
     assert first_params == pytest.approx({"power": 6}) and last_params == pytest.approx({"power": 9})
     middle, _ = bench_view(scene, 2, 5)
     assert middle.position != pytest.approx(first.position)
+
+
+def test_still_bench_renders_the_files_own_view_every_frame():
+    from fractalc.bench import bench, bench_view
+    scene = fractalc.loads("""
+        scene sphere(1)
+        camera { position: (0, -4, 1), target: (0, 0, 0) }
+        path {
+            0: { position: (0, -5, 1), target: (0, 0, 0) }
+            2: { position: (5, 0, 1), target: (0, 0, 0) }
+        }
+    """)
+    for frame in range(4):
+        assert bench_view(scene, frame, 4, still=True) == (scene.checked.camera, {})
+    assert bench_view(scene, 0, 4)[0].position == pytest.approx((0, -5, 1))   # the path, without still
+    result = bench(scene, frames=2, width=16, height=12, still=True)
+    assert result.path == "still" and result.frames == 2
