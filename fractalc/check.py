@@ -672,7 +672,7 @@ RENDER_KEYS = _keys(
     _P("glow", "block:glow"), _P("fog", "block:fog"), _P("slice", "block:slice"),
     _P("ao_method", "word:normal|steps"), _P("dither", "num", None, "0..1"),
     _P("overrelax", "num", None, "1..1.99"), _P("epsilon_scale", "num", None, ">0"),
-    _P("normals", "word:tetrahedral|central"), _P("fast_math", "word:on|off"))
+    _P("normals", "word:tetrahedral|central"), _P("fast_math", "word:auto|on|off"))
 
 
 def check(program: ast.Program) -> CheckedScene:

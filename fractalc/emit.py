@@ -346,6 +346,15 @@ def resolve_features(text: str, enabled: dict[str, bool]) -> str:
     return "\n".join(out)
 
 
+def fast_math(setting: str, target: Target) -> bool:
+    """Whether the kernel uses `native_` functions: `on`, or `auto` on CPUs
+    (vector lanes), where the speed/error sweep measured no error growth
+    (docs/performance.md); never in double, as OpenCL's `native_`
+    functions are float-only."""
+    wanted = setting == "on" or (setting == "auto" and target.lanes > 1)
+    return wanted and not target.double
+
+
 def lane_block(lanes: int) -> tuple[int, int]:
     """The pixel block (columns, rows) one work-item renders: as square as
     the lane count allows (16: 4 x 4, 8: 4 x 2)."""
@@ -371,7 +380,7 @@ def _constants(scene_ir: SceneIR, target: Target) -> str:
         f"#define HIT_EPSILON_IS_PIXEL {int(pixel)}",
         f"#define HIT_EPSILON {literal(0.0 if pixel else render.epsilon)}",
         f"#define EPSILON_SCALE {literal(render.epsilon_scale)}",
-        f"#define FAST_MATH {int(render.fast_math == 'on')}",
+        f"#define FAST_MATH {int(fast_math(render.fast_math, target))}",
         *(f"#define BACKGROUND_{c} {literal(v)}" for c, v in zip("RGB", render.background)),
         f"#define LANES_X {width}",
         f"#define LANES_Y {height}",

@@ -596,3 +596,25 @@ def test_standalone_kernel_matches_fractalc_render(tmp_path):
         np.testing.assert_allclose(standalone[index], planes[name], atol=1e-5, rtol=1e-5)
     np.testing.assert_allclose(standalone[4][hit], planes["Z"][hit], atol=1e-5, rtol=1e-5)
     np.testing.assert_allclose(standalone[8], planes["steps"])
+
+
+def test_fast_math_is_float_only_and_on_by_default_on_cpus():
+    text = "param p = 7 in [2, 16]\nscene mandelbulb(power: p)\n"
+    scene = fractalc.loads(text)
+
+    def fast(**keys):
+        return int(re.search(r"#define FAST_MATH (\d)", scene.kernel_source(**keys)).group(1))
+    assert fast(lanes=16) == 1 and fast(lanes=1) == 0                  # auto: CPUs (lanes), not GPUs
+    assert fast(lanes=1, fast_math="on") == 1 and fast(lanes=16, fast_math="off") == 0
+    # OpenCL has no double native_ functions: a double kernel is exact
+    assert fast(lanes=16, precision="double", fast_math="on") == 0
+    double = fractalc.loads(text, precision="double")
+    np.testing.assert_array_equal(double.render(width=24, height=16, fast_math="on").rgba,
+                                  double.render(width=24, height=16, fast_math="off").rgba)
+    # at power 7 (the trigonometric iteration) native_ functions move the
+    # distance by float rounding only
+    points = np.random.default_rng(3).uniform(-1.2, 1.2, (4000, 3))
+    exact = fractalc.loads(text + "render { fast_math: off }").distance(points)
+    native = fractalc.loads(text + "render { fast_math: on }").distance(points)
+    assert np.all(np.abs(native - exact) < 1e-4 * np.maximum(np.abs(exact), 1))
+    assert not np.array_equal(native, exact) or scene.device.info.kind == "GPU"
