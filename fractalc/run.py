@@ -101,20 +101,24 @@ def render(program, device: Device, frame: Frame, params, lanes: int, double: bo
         # no copy; mapping it at the end makes its contents current anywhere
         out = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=image)
         queued = deque()    # (launch event, pixels) of the tiles in flight
-        for y0 in range(0, rows, tile_height):
-            for x0 in range(0, pitch, tile_width):
-                columns, lines = min(tile_width, pitch - x0), min(tile_height, rows - y0)
-                event = kernel(device.queue, (columns // block_width, lines // block_height), group, out,
-                               params_buffer, camera_buffer, np.int32(width), np.int32(height),
-                               np.int32(x0), np.int32(y0), np.int32(pitch), np.int32(rows),
-                               np.int32(frame.samples), np.uint32(frame.seed))
-                queued.append((event, max(0, min(columns, width - x0)) * max(0, min(lines, height - y0))))
-                # a few tiles ahead keep the device busy while we report
-                # progress, and an interrupt waits for those few only
-                while len(queued) > TILES_IN_FLIGHT:
-                    _finish(queued.popleft(), progress)
-        while queued:
-            _finish(queued.popleft(), progress)
+        try:
+            for y0 in range(0, rows, tile_height):
+                for x0 in range(0, pitch, tile_width):
+                    columns, lines = min(tile_width, pitch - x0), min(tile_height, rows - y0)
+                    event = kernel(device.queue, (columns // block_width, lines // block_height), group,
+                                   out, params_buffer, camera_buffer, np.int32(width), np.int32(height),
+                                   np.int32(x0), np.int32(y0), np.int32(pitch), np.int32(rows),
+                                   np.int32(frame.samples), np.uint32(frame.seed))
+                    queued.append((event, max(0, min(columns, width - x0)) * max(0, min(lines, height - y0))))
+                    # a few tiles ahead keep the device busy while we
+                    # report progress; an interrupt waits for those few
+                    while len(queued) > TILES_IN_FLIGHT:
+                        _finish(queued.popleft(), progress)
+            while queued:
+                _finish(queued.popleft(), progress)
+        except BaseException:
+            device.queue.finish()    # no kernel may write into `image` once it is gone
+            raise
         mapped, _ = cl.enqueue_map_buffer(device.queue, out, cl.map_flags.READ, 0, image.shape,
                                           image.dtype, is_blocking=True)
         mapped.base.release(device.queue)

@@ -28,6 +28,7 @@ import numpy as np
 
 from .api import Image, Scene
 from .bench import aligned, machine, machine_rows
+from .emit import Target, fast_math
 from .errors import RenderError
 from .write import linear_to_srgb, publish
 
@@ -63,8 +64,14 @@ CSV_COLUMNS = ("scene", "width", "height", "device", "label", "reference", *KNOB
 # ------------------------------------------------------------------ settings
 
 def scene_settings(scene: Scene) -> dict:
-    """The scene's own value of every knob (its file, --precision, ...)."""
-    return {knob: getattr(scene.checked.render, knob) for knob in KNOBS}
+    """The scene's own value of every knob (its file, --precision, ...),
+    `fast_math: auto` as what it means on the scene's device (so that no
+    row repeats the scene's kernel)."""
+    settings = {knob: getattr(scene.checked.render, knob) for knob in KNOBS}
+    if settings["fast_math"] == "auto":
+        native = fast_math("auto", Target(lanes=scene.device.lanes))
+        settings["fast_math"] = "on" if native else "off"
+    return settings
 
 
 def reference_settings(settings: dict) -> dict:

@@ -210,3 +210,16 @@ def test_grid_moves_one_knob_away_from_the_scene_and_the_reference_is_finer():
     reference = reference_settings({**settings, "epsilon_scale": 2.0, "fast_math": "on"})
     assert reference == {**settings, "epsilon_scale": 0.2, "max_steps": 800, "precision": "double",
                          "fast_math": "off"}
+
+
+def test_auto_fast_math_is_the_scenes_row_as_it_runs_on_the_device():
+    from fractalc.sweep import scene_settings
+    scene = fractalc.loads("scene sphere(1)")
+    assert scene.checked.render.fast_math == "auto"
+    on_cpu = scene.device.lanes > 1
+    settings = scene_settings(scene)
+    assert settings["fast_math"] == ("on" if on_cpu else "off")
+    # the grid then holds the other value only: no row repeats the scene's kernel
+    assert [c for c in one_knob_changes(settings) if "fast_math" in c] == [
+        {"fast_math": "off" if on_cpu else "on"}]
+    assert scene_settings(fractalc.loads("scene sphere(1)\nrender { fast_math: off }"))["fast_math"] == "off"
