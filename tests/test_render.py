@@ -494,6 +494,33 @@ def test_double_source_has_no_float_literals():
     assert "#define PRECISION_DOUBLE 0" in single
 
 
+UNSUFFIXED_LITERAL = re.compile(r"(?<![\w.])(?:\d+\.\d*|\.\d+|\d+(?=[eE]))(?:[eE][+-]?\d+)?(?![\w.])")
+
+
+def _float_code(source: str) -> str:
+    """A float kernel's source without comments and without the double-only
+    branches of `#if PRECISION_DOUBLE` (not compiled in float)."""
+    lines, skipping = [], False
+    for line in source.splitlines():
+        directive = line.strip()
+        if directive.startswith("#if PRECISION_DOUBLE"):
+            skipping = True
+        elif skipping and directive.startswith(("#else", "#endif")):
+            skipping = False
+        elif not skipping:
+            lines.append(re.sub(r"//.*", "", line))
+    return "\n".join(lines)
+
+
+@pytest.mark.parametrize("example", sorted(p.name for p in (REPO / "examples").glob("*.frac")))
+def test_float_kernels_have_no_double_literals(example):
+    """An unsuffixed literal is a double in OpenCL C and promotes the
+    arithmetic around it to double: every literal of a float kernel carries f."""
+    code = _float_code(fractalc.load(REPO / "examples" / example).kernel_source())
+    assert len(FLOAT_LITERAL.findall(code)) > 10         # the regexes see the literals
+    assert UNSUFFIXED_LITERAL.findall(code) == []
+
+
 # ------------------------------------------------------- standalone kernel
 
 STANDALONE_SCENE = textwrap.dedent("""\
