@@ -256,7 +256,7 @@ def _parser() -> argparse.ArgumentParser:
     compile_.add_argument("scene")
     compile_.add_argument("-o", "--output", required=True, help="output .cl file")
     compile_.add_argument("--lanes", type=int, choices=(1, 2, 4, 8, 16),
-                          help="rays per work-item (default: 8 on CPUs, 1 on GPUs)")
+                          help="rays per work-item (default: the device's, 16 on CPUs, 1 on GPUs)")
     device_options(compile_)
     compile_.set_defaults(run=command_compile)
 

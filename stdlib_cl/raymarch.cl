@@ -188,10 +188,20 @@ vec3 hit_normal(vec3 origin, vec3 dir, march_result m, scalar pixel_angle, __con
     return normal;
 }
 
+#if FEATURE_FOG
+// Exponential fog over a ray's length t: its colour mixes toward the fog's
+// by 1 - exp(-density t); a miss is infinitely far and shows the fog colour.
+vec3 fogged(vec3 color, real t, mask hit) {
+    real clear = SELECT((real)0.0f, exp(-FOG_DENSITY * t), hit);
+    return v3_add(v3_scale(color, clear), v3_scale(v3(FOG_R, FOG_G, FOG_B), 1.0f - clear));
+}
+#endif
+
 #if FEATURE_REFLECTIONS
 // Mirror reflections, up to REFLECTIONS bounces (no recursion): each surface
 // keeps (1 - reflectivity) of its own colour and passes reflectivity on to
-// what its mirror direction sees; a bounce that misses sees the background.
+// what its mirror direction sees; a bounce that misses sees the background
+// (with fog: the fog, and what it hits is fogged along the bounce).
 vec3 reflected_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 seen_first,
                      scalar pixel_angle, __constant scalar *params) {
     mask active = m.hit;
@@ -216,6 +226,9 @@ vec3 reflected_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 se
         vec3 seen = v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);
         if (ANY(b.hit))
             seen = v3_select(seen, shade(p, normal, dir, threshold, b.steps, b.hit, params), b.hit);
+#if FEATURE_FOG
+        seen = fogged(seen, b.t, b.hit);     // the fog along the bounce
+#endif
         seen_now = v3_select(seen_now, seen, active);
         active = active & b.hit;
     }
@@ -267,6 +280,9 @@ vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 
         far = v3_select(far, shade(q, beyond_normal, out_dir, hit_threshold(beyond.t, pixel_angle),
                                    beyond.steps, beyond.hit, params), beyond.hit);
     }
+#if FEATURE_FOG
+    far = fogged(far, beyond.t, beyond.hit);   // the fog beyond the solid
+#endif
     real mixing = SELECT((real)0.0f, s.transparency, active);
     return v3_add(v3_scale(seen, 1.0f - mixing), v3_scale(far, mixing));
 }
@@ -289,9 +305,7 @@ vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixe
     color = reflected_color(origin, dir, m, normal, color, pixel_angle, params);
 #endif
 #if FEATURE_FOG
-    // Exponential fog: a miss is infinitely far and shows the fog colour.
-    real clear = SELECT((real)0.0f, exp(-FOG_DENSITY * m.t), m.hit);
-    color = v3_add(v3_scale(color, clear), v3_scale(v3(FOG_R, FOG_G, FOG_B), 1.0f - clear));
+    color = fogged(color, m.t, m.hit);
 #endif
 #if FEATURE_GLOW
     // Glow, after fog so that fog does not hide it: misses are lit by how

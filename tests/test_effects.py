@@ -602,6 +602,29 @@ def test_fog_covers_what_mirrors_and_glass_show(scene):
     assert short.max() < 1e-3, f"fog missing on {(short > 1e-3).mean():.0%} of the {scene}, up to {short.max():.2f}"
 
 
+def test_fog_lies_along_the_bounce_too():
+    """A mirror's reflection is fogged over both legs: where the bounce hits
+    the sphere the fog fraction is 1 - exp(-density (t1 + t2)), t1 to the
+    floor and t2 from it to the sphere; where it misses, the pixel is the fog
+    colour itself (an infinitely long ray), not the background."""
+    density, fog = 0.3, ", fog: { color: (1, 1, 1), density: 0.3 }"
+    clear, foggy = render(_mirror_scene(1)), render(_mirror_scene(1, more=fog))
+    predicted, direct = _mirror_prediction()
+    dirs, origin = MIRROR_CAMERA.rays(), MIRROR_CAMERA.position
+    t1 = foggy.depth.astype(np.float64)
+    on_floor = origin + np.where(np.isfinite(t1), t1, 0)[..., None] * dirs
+    t2 = ray_sphere(on_floor, dirs * np.array([1, 1, -1]), RED_CENTRE, RED_RADIUS)
+    base = clear.rgba[..., :3].astype(np.float64).sum(axis=-1)
+    fraction = (foggy.rgba[..., :3].sum(axis=-1) - base) / (3.0 - base)
+    expected = 1 - np.exp(-density * (t1 + np.where(np.isfinite(t2), t2, 0)))
+    assert predicted.sum() > 40
+    assert np.abs(fraction - expected)[predicted].max() < 1e-3
+    floor = np.isfinite(foggy.depth) & ~direct
+    missed = floor & ~np.isfinite(t2)                     # bounces that leave the scene
+    assert missed.sum() > 300
+    assert np.allclose(foggy.rgba[..., :3][missed], 1.0, atol=1e-5)
+
+
 # ----------------------------------------------------------------- dithering
 
 DITHER_CAMERA = Camera((0, -4.0, 1.5), (0, 0, 0), fov=40)
