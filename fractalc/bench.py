@@ -155,8 +155,7 @@ def bench(scene: Scene, frames: int = 30, width: int | None = None, height: int 
     medians = {key: statistics.median(run[key] for run in runs) for key in runs[0]}
     return BenchResult(
         scene=scene.checked.file, path="still" if still else "path" if scene.checked.path else "orbit",
-        width=width,
-        height=height, frames=frames, repeat=repeat,
+        width=width, height=height, frames=frames, repeat=repeat,
         compile_seconds=compile_seconds, **medians, **machine(scene), precision=scene.precision,
         lanes=scene.device.lanes)
 

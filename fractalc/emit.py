@@ -396,12 +396,11 @@ _HEADER = """\
 // Kernels (build with no options; `real` is {real} here, LANES = {lanes} rays
 // per work-item):
 //   render(__global float *out, __constant {scalar} *params, __constant {scalar} *camera,
-//          int width, int height, int x0, int y0, int pitch, int rows,
-//          int samples, uint seed)
-//     Renders pixels of a width x height image into `out`: rows of pitch
-//     pixels of 9 floats, R G B A Z N.x N.y N.z steps (linear colour; Z =
-//     +inf where the ray missed), pixel (x, y) at (y * pitch + x) * 9,
-//     for rows >= height rows, where pitch >= width and rows are multiples
+//          int width, int height, int x0, int y0, int pitch, int samples, uint seed)
+//     Renders pixels of a width x height image into `out`, which holds
+//     `rows` rows of `pitch` pixels of 9 floats each: R G B A Z N.x N.y N.z
+//     steps (linear colour; Z = +inf where the ray missed), pixel (x, y) at
+//     (y * pitch + x) * 9. pitch >= width and rows >= height are multiples
 //     of LANES_X and LANES_Y (blocks past the image's edge write there). A
 //     work-item renders a block of LANES_X x LANES_Y pixels ({block}): the
 //     block at (x0 + LANES_X * i, y0 + LANES_Y * j) for global id (i, j).

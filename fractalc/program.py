@@ -148,7 +148,7 @@ class RenderSettings:
     overrelax: float = 1.3           # over-relaxation factor of sphere tracing (1 = plain)
     epsilon_scale: float = 1.0       # multiplies the hit threshold (a quality knob)
     normals: str = "tetrahedral"     # finite differences: tetrahedral (4 evaluations) or central (6)
-    fast_math: str = "auto"         # on: native_ transcendental functions; auto: on CPUs
+    fast_math: str = "auto"          # on: native_ transcendental functions; auto: on CPUs
 
 
 @dataclass(frozen=True)

@@ -107,7 +107,7 @@ def render(program, device: Device, frame: Frame, params, lanes: int, double: bo
                     columns, lines = min(tile_width, pitch - x0), min(tile_height, rows - y0)
                     event = kernel(device.queue, (columns // block_width, lines // block_height), group,
                                    out, params_buffer, camera_buffer, np.int32(width), np.int32(height),
-                                   np.int32(x0), np.int32(y0), np.int32(pitch), np.int32(rows),
+                                   np.int32(x0), np.int32(y0), np.int32(pitch),
                                    np.int32(frame.samples), np.uint32(frame.seed))
                     queued.append((event, max(0, min(columns, width - x0)) * max(0, min(lines, height - y0))))
                     # a few tiles ahead keep the device busy while we

@@ -322,12 +322,12 @@ vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixe
 // (compact blocks keep a work-item's rays alike, so its lanes diverge less
 // than a row of LANES would). `out`: the whole image, whatever the tile:
 // rows of `pitch` pixels of CHANNELS floats (R G B A Z N.x N.y N.z steps),
-// pixel (x, y) at (y * pitch + x) * CHANNELS; pitch and rows are at least
-// the image's width and height, multiples of LANES_X and LANES_Y (blocks
-// past the image's edge write there).
+// pixel (x, y) at (y * pitch + x) * CHANNELS; pitch >= width and its row
+// count >= height are multiples of LANES_X and LANES_Y (blocks past the
+// image's edge write there).
 __kernel void render(__global float *out, __constant scalar *params,
                      __constant scalar *camera, int width, int height,
-                     int x0, int y0, int pitch, int rows, int samples, uint seed) {
+                     int x0, int y0, int pitch, int samples, uint seed) {
     int gx = get_global_id(0), gy = get_global_id(1);
     int block_x = x0 + gx * LANES_X, block_y = y0 + gy * LANES_Y;
     real px = (real)block_x + LANE_X;

@@ -573,7 +573,7 @@ STANDALONE_RUNNER = textwrap.dedent("""\
     camera_buffer = cl.Buffer(context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=camera)
     program.render(queue, (pitch // block_x, rows // block_y), None, out_buffer, params_buffer,
                    camera_buffer, np.int32(width), np.int32(height), np.int32(0), np.int32(0),
-                   np.int32(pitch), np.int32(rows), np.int32(1), np.uint32(0))
+                   np.int32(pitch), np.int32(1), np.uint32(0))
     cl.enqueue_copy(queue, out, out_buffer)
     queue.finish()
     assert "fractalc" not in sys.modules
