@@ -193,18 +193,39 @@ def _surface_function(scene_ir: SceneIR) -> str:
         "    return s;", "}"])
 
 
+def _bound_expressions(bound) -> tuple[ir.Expr, ...]:
+    (centre, radius), half_spaces = bound.sphere, bound.half_spaces
+    return (*centre, radius, *(e for normal, offset in half_spaces for e in (*normal, offset)))
+
+
 def _bound_function(scene_ir: SceneIR) -> str:
     """`scene_bound`: the radius and (through `centre`) the centre of a
-    sphere holding the whole scene; uniform, so computed from params only."""
-    centre, radius = scene_ir.bound
+    sphere holding the whole scene but its ground half-spaces; uniform, so
+    computed from params only. With half-spaces, `clear_of_half_spaces`."""
+    (centre, radius), half_spaces = scene_ir.bound.sphere, scene_ir.bound.half_spaces
     writer = _FunctionWriter(ir.Vec(tuple(centre) + (radius,)))
     writer.block(writer.root, "    ")
     x, y, z, r = (writer.argument(e) for e in tuple(centre) + (radius,))
-    return "\n".join(["real scene_bound(__constant scalar *params, vec3 *centre) {", *writer.lines,
-                      f"    *centre = v3({x}, {y}, {z});", f"    return {r};", "}"])
+    lines = ["real scene_bound(__constant scalar *params, vec3 *centre) {", *writer.lines,
+             f"    *centre = v3({x}, {y}, {z});", f"    return {r};", "}"]
+    if half_spaces:
+        writer = _FunctionWriter(ir.Vec(tuple(e for n, o in half_spaces for e in (*n, o))))
+        writer.block(writer.root, "    ")
+        lines += ["",
+                  "// Whether rays from `origin` along `dir` stay clear of every ground half-space",
+                  "// n.p <= offset: they start above it (by `height`) and move away from it.",
+                  "mask clear_of_half_spaces(vec3 origin, vec3 dir, real height, __constant scalar *params) {",
+                  *writer.lines, "    mask clear = MASK_TRUE;"]
+        for normal, offset in half_spaces:
+            n = ", ".join(writer.argument(c) for c in normal)
+            lines += [f"    {{   vec3 n = v3({n});",
+                      f"        clear = clear & (v3_dot(origin, n) - {writer.argument(offset)} >= height)"
+                      " & (v3_dot(dir, n) >= 0.0f);   }"]
+        lines += ["    return clear;", "}"]
+    return "\n".join(lines)
 
 
-def _light_block(index: int, light: Light, bounded: bool) -> tuple[str, set[str]]:
+def _light_block(index: int, light: Light, bound) -> tuple[str, set[str]]:
     radiance = _vector(tuple(c * light.intensity for c in light.color))
     lines = [f"    {{   // light {index}: {light.kind}, shadows {light.shadows}"]
     if light.kind == "directional":
@@ -219,13 +240,20 @@ def _light_block(index: int, light: Light, bounded: bool) -> tuple[str, set[str]
                   "        vec3 to_light = v3_scale(offset, 1.0f / reach);",
                   f"        vec3 radiance = v3_scale({radiance}, 1.0f / (reach * reach));"]
     needs = set()
-    if bounded and light.shadows != "none":
-        # past the scene's bounding sphere nothing can block the light
-        # (two statements: C leaves the order of a call's arguments open)
+    if bound is not None and light.shadows != "none":
+        # past the scene's bounding sphere nothing can block the light, nor
+        # anywhere if the ray misses it (two statements: C leaves the order
+        # of a call's arguments open) ...
         lines += ["        real enter, leave;",
                   "        mask toward_bound = ray_sphere_span(lifted, to_light, bound_centre, bound_radius, "
-                  "&enter, &leave);",
-                  "        reach = SELECT(reach, fmin(reach, leave), toward_bound);"]
+                  "&enter, &leave);"]
+        bounded_reach = "SELECT((real)0.0f, fmin(reach, leave), toward_bound)"
+        if bound.half_spaces:
+            # ... unless it may meet a ground half-space
+            lines.append(f"        reach = SELECT(reach, {bounded_reach}, "
+                         "clear_of_half_spaces(lifted, to_light, threshold, params));")
+        else:
+            lines.append(f"        reach = {bounded_reach};")
     if light.shadows != "none":
         # a surface facing away from the light gets none of it (blinn_phong
         # is 0 there): no shadow ray
@@ -270,14 +298,14 @@ def _shade_function(scene_ir: SceneIR) -> tuple[str, list[str]]:
                   "    color = v3_add(color, blinn_phong(normal, to_eye, to_eye, albedo, s.specular, "
                   "s.shininess, v3(1.0f, 1.0f, 1.0f)));"]
     for index, light in enumerate(scene.lights):
-        block, light_needs = _light_block(index, light, scene_ir.bound is not None)
+        block, light_needs = _light_block(index, light, scene_ir.bound)
         lines.append(block)
         needs |= light_needs
     lines += ["    return color;", "}"]
     return "\n".join(lines), sorted(needs)
 
 
-def features(render, camera, surface, bounded: bool) -> dict[str, bool]:
+def features(render, camera, surface, bounded: bool, half_spaces: bool = False) -> dict[str, bool]:
     """The template's optional effects, on where the scene uses them."""
     transparent = not (ir.is_const(surface.transparency) and surface.transparency.value == 0)
     glow = render.glow is not None and render.glow.strength > 0
@@ -294,6 +322,7 @@ def features(render, camera, surface, bounded: bool) -> dict[str, bool]:
         "OVERRELAX": render.overrelax > 1 and not glow and not step_ao,
         # glow needs every miss's closest approach, so misses must be marched
         "SCENE_BOUND": bounded and not glow,
+        "SCENE_HALF_SPACES": bounded and half_spaces and not glow,
     }
 
 
@@ -316,8 +345,9 @@ def _effect_constants(render, on: dict[str, bool]) -> list[str]:
 
 
 def _scene_features(scene_ir: SceneIR) -> dict[str, bool]:
+    bound = scene_ir.bound
     return features(scene_ir.scene.render, scene_ir.scene.camera, scene_ir.surface,
-                    scene_ir.bound is not None)
+                    bound is not None, bound is not None and bool(bound.half_spaces))
 
 
 _FEATURE_IF = re.compile(r"^#if FEATURE_(\w+)\s*$")
@@ -432,7 +462,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         shading_needs = shading_needs + ["ray_sphere_span"]
     roots = [scene_ir.distance, ir.Vec(scene_ir.surface.items())]
     if scene_ir.bound is not None:
-        roots.append(ir.Vec(tuple(scene_ir.bound[0]) + (scene_ir.bound[1],)))
+        roots.append(ir.Vec(_bound_expressions(scene_ir.bound)))
     scene_functions = lib.closure(sorted({name for root in roots for name in _calls(root)}))
     placed = {f.name for f in scene_functions}
     normal_method = f"{scene.render.normals}_normal"

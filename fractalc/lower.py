@@ -56,7 +56,7 @@ class SceneIR:
     scene: CheckedScene
     distance: ir.Expr            # real, of POINT
     surface: Surface             # of POINT
-    bound: Sphere | None = None  # a sphere holding the whole scene (uniform)
+    bound: Bound | None = None   # where the whole scene can be (uniform)
 
 
 def _smooth_or_plain(plain: str, smooth_function: str, a, b, k: ir.Expr) -> ir.Expr:
@@ -178,39 +178,76 @@ class _Lowerer:
 
 
 Sphere = tuple[Point, ir.Expr]      # centre and radius
+HalfSpace = tuple[Point, ir.Expr]   # unit normal n and offset: the points with n.p <= offset
+
+
+@dataclass(frozen=True)
+class Bound:
+    """Where a shape can be: within `sphere` (None: nowhere) or in one of
+    the `half_spaces` (ground planes). A ray that has left the sphere and
+    moves away from every half-space it is outside of meets nothing more."""
+    sphere: Sphere | None
+    half_spaces: tuple[HalfSpace, ...] = ()
 
 
 class _Bounds:
-    """A sphere holding a whole shape, or None where it is unbounded (a
-    plane, repetition, a warp); unions take a sphere around both."""
+    """The Bound of a shape, or None where it is unbounded (repetition, a
+    warp); unions take a sphere around their parts' spheres and all their
+    half-spaces."""
 
     def __init__(self):
         self.library = library()
 
-    def of(self, s: Shape) -> Sphere | None:
+    def of(self, s: Shape) -> Bound | None:
         if isinstance(s, Primitive):
+            if s.signature.name == "plane":
+                normal, offset = s.args
+                length = ir.op("sqrt", _dot(*normal.items))
+                return Bound(None, ((tuple(ir.div(c, length) for c in normal.items), offset),))
             function = f"{s.signature.name}_bound_radius"
             if function not in self.library.functions:
                 return None
-            return (ir.const(0.0),) * 3, ir.call(function, s.args)
+            return Bound(((ir.const(0.0),) * 3, ir.call(function, s.args)))
         if isinstance(s, WithMaterial):
             return self.of(s.shape)
         if isinstance(s, Combination):
-            spheres = [self.of(child) for child in s.shapes]
-            if s.kind != "union":        # intersect and subtract only shrink the first shape
-                return spheres[0] if spheres[0] is not None else next((b for b in spheres if b), None)
-            if any(b is None for b in spheres):
-                return None
+            return self._combination(s)
+        inner = self.of(s.shape)
+        if inner is None or s.kind in ("repeat", "twist", "bend"):
+            return None
+        return Bound(self._moved_sphere(s, inner.sphere),
+                     tuple(self._moved_half_space(s, h) for h in inner.half_spaces))
+
+    def _combination(self, s: Combination) -> Bound | None:
+        bounds = [self.of(child) for child in s.shapes]
+        if s.kind == "subtract":             # only ever smaller than the first shape
+            return bounds[0]
+        if s.kind == "intersect":            # within each part: the tightest one known
+            known = [b for b in bounds if b is not None]
+            bounded = [b for b in known if b.sphere is not None and not b.half_spaces]
+            return (bounded or known or [None])[0]
+        if any(b is None for b in bounds):
+            return None
+        spheres = [b.sphere for b in bounds if b.sphere is not None]
+        sphere = None
+        if spheres:
             centre, radius = spheres[0]
             for other_centre, other_radius in spheres[1:]:
                 gap = ir.op("sqrt", _dot(*(ir.sub(a, b) for a, b in zip(other_centre, centre))))
                 radius = ir.op("max", radius, ir.add(gap, other_radius))
-            # a smooth union bulges by at most k / 4 beyond both shapes
-            return centre, ir.add(radius, ir.mul(s.smooth, ir.const(0.25)))
-        inner = self.of(s.shape)
-        if inner is None or s.kind in ("repeat", "twist", "bend"):
+            sphere = centre, radius
+        # a smooth union bulges by at most k / 4 beyond both shapes
+        bulge = ir.mul(s.smooth, ir.const(0.25))
+        if sphere is not None:
+            sphere = sphere[0], ir.add(sphere[1], bulge)
+        half_spaces = tuple((n, ir.add(offset, bulge)) for b in bounds for n, offset in b.half_spaces)
+        return Bound(sphere, half_spaces)
+
+    @staticmethod
+    def _moved_sphere(s: Transformed, sphere: Sphere | None) -> Sphere | None:
+        if sphere is None:
             return None
-        centre, radius = inner
+        centre, radius = sphere
         args = s.args
         if s.kind == "translate":
             return tuple(ir.add(c, v) for c, v in zip(centre, args[0].items)), radius
@@ -221,6 +258,24 @@ class _Bounds:
         if s.kind == "round":
             return centre, ir.add(radius, args[0])
         return centre, radius    # onion: inside the shape
+
+    @staticmethod
+    def _moved_half_space(s: Transformed, half_space: HalfSpace) -> HalfSpace:
+        normal, offset = half_space
+        args = s.args
+        if s.kind == "translate":
+            return normal, ir.add(offset, _dot3(normal, args[0].items))
+        if s.kind == "rotate":
+            return _rotated(normal, args[0], ir.neg(args[1])), offset
+        if s.kind == "scale":
+            return normal, ir.mul(offset, args[0])
+        if s.kind == "round":
+            return normal, ir.add(offset, args[0])
+        return normal, offset    # onion: inside the shape
+
+
+def _dot3(a: Point, b: Point) -> ir.Expr:
+    return ir.add(ir.add(ir.mul(a[0], b[0]), ir.mul(a[1], b[1])), ir.mul(a[2], b[2]))
 
 
 def _dot(x, y, z) -> ir.Expr:
@@ -242,4 +297,7 @@ def lower(scene: CheckedScene) -> SceneIR:
         for p, c in zip(point, cut.normal):
             plane = ir.add(plane, ir.mul(p, ir.const(c / length)))
         distance = ir.op("max", distance, plane)
-    return SceneIR(scene, distance, surface, _Bounds().of(scene.shape))
+    bound = _Bounds().of(scene.shape)
+    if bound is not None and bound.sphere is None:
+        bound = None       # half-spaces alone (a ground plane): march as unbounded
+    return SceneIR(scene, distance, surface, bound)

@@ -81,7 +81,16 @@ march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real 
     // widened by the hit threshold at its far side: rays that pass within
     // the threshold of the scene hit it, bound or not
     radius = radius + hit_threshold(v3_length(v3_sub(origin, centre)) + radius, pixel_angle);
-    active = active & ray_sphere_span(origin, dir, centre, radius, &r.t, &t_exit);
+    mask in_bound = ray_sphere_span(origin, dir, centre, radius, &r.t, &t_exit);
+#if FEATURE_SCENE_HALF_SPACES
+    // The scene's ground half-spaces lie outside the sphere: a ray that may
+    // meet one is marched from its start to MAX_DISTANCE, as unbounded.
+    mask clear = clear_of_half_spaces(origin, dir, hit_threshold(0.0f, pixel_angle), params);
+    r.t = SELECT((real)0.0f, r.t, clear);
+    t_exit = SELECT((real)MAX_DISTANCE, t_exit, clear);
+    in_bound = in_bound | !clear;
+#endif
+    active = active & in_bound;
 #endif
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
         real d = distance_estimate(v3_add(origin, v3_scale(dir, r.t)), params);

@@ -645,3 +645,45 @@ def test_fast_math_is_float_only_and_on_by_default_on_cpus():
     native = fractalc.loads(text + "render { fast_math: on }").distance(points)
     assert np.all(np.abs(native - exact) < 1e-4 * np.maximum(np.abs(exact), 1))
     assert not np.array_equal(native, exact) or scene.device.info.kind == "GPU"
+
+
+# ------------------------------------------------------- the scene's bound
+
+BOUND_SCENES = {   # name: (scene, whether the scene has a bound)
+    "plane minus a ball": ("subtract(plane(offset: -1), sphere(1.5))", False),   # a ground alone
+    "a ball minus a plane": ("subtract(sphere(1.5), plane(offset: 0.5))", True),
+    "a ball on the ground": ("sphere(1).translate((0, 0, 1)) | plane()", True),
+    "a moved, turned, rounded ground": ("union(box(1).round(0.1), plane(normal: (0.2, 0.1, 1), offset: -1)"
+                                        ".translate((0, 0, 0.3)).rotate((0, 0, 1), 30).round(0.05), "
+                                        "smooth: 0.2)", True),
+    "a ground cut to a disc": ("intersect(plane(), sphere(2)) | torus(1, 0.3).translate((0, 0, 0.5))", True),
+}
+# far below every ground and inside it, and unbounded: no bound for the scene
+UNBOUNDED = " | sphere(0.1).translate((0, 0, -60)).repeat((300, 300, 0))"
+
+
+@pytest.mark.parametrize("shape", sorted(BOUND_SCENES))
+def test_the_scene_bound_changes_nothing_but_the_work(shape):
+    """Rays start and end at the scene's bounding sphere, and skip it
+    altogether once clear of its ground half-spaces: the image is the
+    unbounded scene's, for less marching."""
+    def scene(text):
+        return fractalc.loads(textwrap.dedent(f"""\
+            scene {text}
+            camera {{ position: (0.5, -6, 2.5), target: (0, 0, 0.5) }}
+            light directional {{ direction: (-0.4, 0.5, -1), shadows: hard }}
+            render {{ width: 64, height: 48, epsilon: 1e-4, max_distance: 40, dither: 0 }}
+            """))
+    text, has_bound = BOUND_SCENES[shape]
+    bounded, unbounded = scene(text), scene(text + UNBOUNDED)
+    defined = re.compile(r"^real scene_bound\(", re.M)
+    assert bool(defined.search(bounded.kernel_source())) == has_bound
+    assert not defined.search(unbounded.kernel_source())
+    a, b = bounded.render(), unbounded.render()
+    hit = np.isfinite(a.depth)
+    assert 0.05 < hit.mean() < 0.95
+    assert (hit != np.isfinite(b.depth)).sum() <= 1
+    both = hit & np.isfinite(b.depth)
+    assert np.abs(a.depth[both] - b.depth[both]).max() < 1e-3
+    assert np.mean(np.abs(a.rgba - b.rgba) > 1e-3) < 0.01
+    assert a.steps.sum() < b.steps.sum() if has_bound else a.steps.sum() == b.steps.sum()
