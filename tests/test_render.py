@@ -657,6 +657,8 @@ BOUND_SCENES = {   # name: (scene, whether the scene has a bound)
                                         ".translate((0, 0, 0.3)).rotate((0, 0, 1), 30).round(0.05), "
                                         "smooth: 0.2)", True),
     "a ground cut to a disc": ("intersect(plane(), sphere(2)) | torus(1, 0.3).translate((0, 0, 0.5))", True),
+    "an onion shell": ("sphere(1).onion(0.3).translate((0, 0, 0.5))", True),
+    "an onion ground": ("sphere(0.5) | plane(offset: -1).onion(0.2)", True),
 }
 # far below every ground and inside it, and unbounded: no bound for the scene
 UNBOUNDED = " | sphere(0.1).translate((0, 0, -60)).repeat((300, 300, 0))"
