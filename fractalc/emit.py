@@ -198,17 +198,18 @@ def _bound_expressions(bound) -> tuple[ir.Expr, ...]:
     return (*centre, radius, *(e for normal, offset in half_spaces for e in (*normal, offset)))
 
 
-def _bound_function(scene_ir: SceneIR) -> str:
+def _bound_function(scene_ir: SceneIR, with_half_spaces: bool) -> str:
     """`scene_bound`: the radius and (through `centre`) the centre of a
     sphere holding the whole scene but its ground half-spaces; uniform, so
-    computed from params only. With half-spaces, `clear_of_half_spaces`."""
+    computed from params only; and `clear_of_half_spaces` if asked for and
+    the scene has half-spaces."""
     (centre, radius), half_spaces = scene_ir.bound.sphere, scene_ir.bound.half_spaces
     writer = _FunctionWriter(ir.Vec(tuple(centre) + (radius,)))
     writer.block(writer.root, "    ")
     x, y, z, r = (writer.argument(e) for e in tuple(centre) + (radius,))
     lines = ["real scene_bound(__constant scalar *params, vec3 *centre) {", *writer.lines,
              f"    *centre = v3({x}, {y}, {z});", f"    return {r};", "}"]
-    if half_spaces:
+    if half_spaces and with_half_spaces:
         writer = _FunctionWriter(ir.Vec(tuple(e for n, o in half_spaces for e in (*n, o))))
         writer.block(writer.root, "    ")
         lines += ["",
@@ -457,11 +458,14 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
     distance = _FunctionWriter(scene_ir.distance).write(
         "real distance_estimate(vec3 p, __constant scalar *params)")
     shade, shading_needs = _shade_function(scene_ir)
-    bound = _bound_function(scene_ir) if scene_ir.bound is not None else ""
-    if bound:
-        shading_needs = shading_needs + ["ray_sphere_span"]
+    on = _scene_features(scene_ir)
+    # the bound serves the march (not with glow) and the shadow rays
+    shadows = any(light.shadows != "none" for light in scene.lights)
+    bound = ""
     roots = [scene_ir.distance, ir.Vec(scene_ir.surface.items())]
-    if scene_ir.bound is not None:
+    if scene_ir.bound is not None and (on["SCENE_BOUND"] or shadows):
+        bound = _bound_function(scene_ir, on["SCENE_HALF_SPACES"] or shadows)
+        shading_needs = shading_needs + ["ray_sphere_span"]
         roots.append(ir.Vec(_bound_expressions(scene_ir.bound)))
     scene_functions = lib.closure(sorted({name for root in roots for name in _calls(root)}))
     placed = {f.name for f in scene_functions}
@@ -483,7 +487,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         f"vec3 estimate_normal(vec3 p, real h, __constant scalar *params) {{\n"
         f"    return {normal_method}(p, h, params);\n}}",
         shade,
-        resolve_features(lib.template, _scene_features(scene_ir)),
+        resolve_features(lib.template, on),
     ]
     source = "\n\n".join(p.strip("\n") for p in parts if p) + "\n"
     if target.double:

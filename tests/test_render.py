@@ -689,3 +689,16 @@ def test_the_scene_bound_changes_nothing_but_the_work(shape):
     assert np.abs(a.depth[both] - b.depth[both]).max() < 1e-3
     assert np.mean(np.abs(a.rgba - b.rgba) > 1e-3) < 0.01
     assert a.steps.sum() < b.steps.sum() if has_bound else a.steps.sum() == b.steps.sum()
+
+
+@pytest.mark.parametrize("decls, expected", [
+    ("", (True, True)),                                           # camera and shadow rays use it
+    ("render { glow: { strength: 0.5 } }", (False, False)),       # glow marches every ray in full
+    ("render { glow: { strength: 0.5 } }\nlight directional { direction: (0, 0, -1), shadows: hard }",
+     (True, True)),                                               # ... but shadow rays still stop
+])
+def test_the_bound_is_in_the_kernel_only_where_used(decls, expected):
+    source = fractalc.loads(f"scene sphere(1) | plane()\n{decls}").kernel_source()
+    defined = tuple(bool(re.search(rf"^\w+ {name}\(", source, re.M))
+                    for name in ("scene_bound", "clear_of_half_spaces"))
+    assert defined == expected
