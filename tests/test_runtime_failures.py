@@ -61,3 +61,35 @@ def test_ctrl_c_stops_cleanly_without_output(tmp_path, monkeypatch, capsys):
     assert status == 130 and "interrupted" in err and "Traceback" not in err
     assert out.read_bytes() == b"previous image"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png", "scene.frac"]   # no temporary left
+
+
+def test_an_interrupted_render_waits_for_the_tiles_it_queued():
+    """The kernel writes into the array the render returns; when Ctrl-C
+    stops a render between tiles, no queued tile may still be writing once
+    the array is gone: the render finishes the queue before it lets go."""
+    import dataclasses
+
+    import fractalc
+    import pyopencl as cl
+
+    scene = fractalc.loads(SCENE)
+    program, target = scene._program(scene.checked.render)
+    device = scene.device
+
+    class RecordingQueue(cl.CommandQueue):
+        finished = 0
+
+        def finish(self):
+            RecordingQueue.finished += 1
+            return super().finish()
+
+    queue = RecordingQueue(device.context)
+    watched = dataclasses.replace(device, queue=queue)
+    frame = run.Frame(64, 8 * run.TILE_HEIGHT, 1, 0, run.camera_block(scene.checked.camera))
+
+    def interrupt(pixels):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run.render(program, watched, frame, [], target.lanes, target.double, interrupt)
+    assert RecordingQueue.finished == 1
