@@ -226,7 +226,7 @@ def _bound_function(scene_ir: SceneIR, with_half_spaces: bool) -> str:
     return "\n".join(lines)
 
 
-def _light_block(index: int, light: Light, bound) -> tuple[str, set[str]]:
+def _light_block(index: int, light: Light, bound, transparent: bool) -> tuple[str, set[str]]:
     radiance = _vector(tuple(c * light.intensity for c in light.color))
     lines = [f"    {{   // light {index}: {light.kind}, shadows {light.shadows}"]
     if light.kind == "directional":
@@ -260,8 +260,11 @@ def _light_block(index: int, light: Light, bound) -> tuple[str, set[str]]:
         # is 0 there): no shadow ray
         lines.append("        mask facing = hit & (v3_dot(normal, to_light) > 0.0f);")
     if light.shadows == "hard":
-        lines.append("        radiance = v3_scale(radiance, hard_shadow(lifted, to_light, reach, threshold, facing, params));")
-        needs.add("hard_shadow")
+        # through transparent solids where the scene has some
+        function = "hard_shadow_through" if transparent else "hard_shadow"
+        lines.append(f"        radiance = v3_scale(radiance, {function}(lifted, to_light, reach, threshold, "
+                     "facing, params));")
+        needs.add(function)
     elif light.shadows == "soft":
         lines.append(f"        radiance = v3_scale(radiance, soft_shadow(lifted, to_light, reach, threshold, "
                      f"{literal(light.softness)}, facing, params));")
@@ -298,8 +301,9 @@ def _shade_function(scene_ir: SceneIR) -> tuple[str, list[str]]:
         lines += ["    // no lights in the scene: a headlight, from the eye along the ray",
                   "    color = v3_add(color, blinn_phong(normal, to_eye, to_eye, albedo, s.specular, "
                   "s.shininess, v3(1.0f, 1.0f, 1.0f)));"]
+    transparent = _scene_features(scene_ir)["TRANSPARENCY"]
     for index, light in enumerate(scene.lights):
-        block, light_needs = _light_block(index, light, scene_ir.bound)
+        block, light_needs = _light_block(index, light, scene_ir.bound, transparent)
         lines.append(block)
         needs |= light_needs
     lines += ["    return color;", "}"]

@@ -579,6 +579,35 @@ def test_what_is_behind_the_glass_changes_what_is_seen_through_it():
     assert np.allclose(half[inside], 0.5 * opaque[inside] + 0.5 * first[inside], atol=1e-5)
 
 
+def _glass_roof_scene(transparency, roof=True):
+    roof_text = "| box((2, 2, 0.2)).translate((0, 0, 1.5)).material(glass)" if roof else ""
+    return f"""
+        material glass {{ color: (0.1, 0.8, 0.1), transparency: {transparency}, ior: 1.5, specular: 0 }}
+        material ground {{ color: (0.8, 0.8, 0.8), specular: 0 }}
+        scene plane().material(ground) {roof_text}
+        camera {{ position: (0, -5, 1), target: (0, 0, 0), fov: 40 }}
+        light directional {{ direction: (0, 0, -1), shadows: hard }}
+        render {{ epsilon: 1e-4, dither: 0 }}
+    """
+
+
+def test_hard_shadows_pass_through_transparent_solids():
+    """A solid of transparency T passes T of the light to the ground under
+    it (straight through, no refraction); an opaque one none."""
+    camera = Camera((0, -5, 1), (0, 0, 0), fov=40)
+    lit = render(_glass_roof_scene(0.5, roof=False))
+    opaque = render(_glass_roof_scene(0.0))
+    p = camera.hit_points(lit)
+    # ground under the roof, seen directly (the rays pass below the roof)
+    under = np.isfinite(lit.depth) & (np.abs(p[..., 0]) < 0.9) & (np.abs(p[..., 1]) < 0.9)
+    assert under.sum() > 100
+    dark, bright = opaque.rgba[..., 0][under], lit.rgba[..., 0][under]
+    assert np.all(bright - dark > 0.3)                       # the opaque roof's shadow
+    for transparency in (0.25, 0.5, 1.0):
+        seen = render(_glass_roof_scene(transparency)).rgba[..., 0][under]
+        assert np.allclose(seen, dark + transparency * (bright - dark), atol=1e-4), transparency
+
+
 # ------------------------------------------------------- effects together
 
 @pytest.mark.parametrize("scene", ["mirror", "glass"])

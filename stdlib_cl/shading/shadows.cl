@@ -17,6 +17,36 @@ real hard_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, mask ac
     return visible;
 }
 
+// Hard shadow in a scene with transparent solids: a solid passes its
+// `transparency` of the light (straight through: no refraction, no
+// caustics), so the ray steps into it, marches through it by the depth
+// (-d, as `transmitted_color` does) and on from its far side; an opaque
+// solid blocks it.
+real hard_shadow_through(vec3 origin, vec3 to_light, real max_t, real threshold, mask active,
+                         __constant scalar *params) {
+    real t = 2.0f * threshold;
+    real visible = 1.0f;
+    mask inside = (mask)0;
+    for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
+        vec3 q = v3_add(origin, v3_scale(to_light, t));
+        real d = distance_estimate(q, params);
+        mask entering = active & !inside & (d < threshold);
+        if (ANY(entering)) {
+            real clear = SELECT((real)0.0f, surface_at(q, params).transparency, entering);
+            visible = SELECT(visible, visible * clear, entering);
+            active = active & !(entering & (clear <= 0.0f));
+        }
+        mask leaving = inside & (d > -threshold);
+        inside = (inside | entering) & !leaving;
+        // outside: sphere tracing; inside: steps of the depth; across a
+        // surface: twice the threshold
+        real step = SELECT(max(d, threshold), max(-d, threshold), inside);
+        t = t + SELECT(step, 2.0f * threshold, entering | leaving);
+        active = active & (t < max_t);
+    }
+    return visible;
+}
+
 // Soft shadow, after Quilez ("penumbra"): the smallest k * d / t along the
 // ray, so rays that graze an occluder are partly lit; larger k, harder edge.
 real soft_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, real k, mask active,
