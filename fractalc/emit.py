@@ -193,9 +193,13 @@ def _surface_function(scene_ir: SceneIR) -> str:
         "    return s;", "}"])
 
 
+def _half_space_expressions(half_spaces) -> tuple[ir.Expr, ...]:
+    return tuple(e for normal, offset in half_spaces for e in (*normal, offset))
+
+
 def _bound_expressions(bound) -> tuple[ir.Expr, ...]:
     (centre, radius), half_spaces = bound.sphere, bound.half_spaces
-    return (*centre, radius, *(e for normal, offset in half_spaces for e in (*normal, offset)))
+    return (*centre, radius, *_half_space_expressions(half_spaces))
 
 
 def _bound_function(scene_ir: SceneIR, with_half_spaces: bool) -> str:
@@ -210,7 +214,7 @@ def _bound_function(scene_ir: SceneIR, with_half_spaces: bool) -> str:
     lines = ["real scene_bound(__constant scalar *params, vec3 *centre) {", *writer.lines,
              f"    *centre = v3({x}, {y}, {z});", f"    return {r};", "}"]
     if half_spaces and with_half_spaces:
-        writer = _FunctionWriter(ir.Vec(tuple(e for n, o in half_spaces for e in (*n, o))))
+        writer = _FunctionWriter(ir.Vec(_half_space_expressions(half_spaces)))
         writer.block(writer.root, "    ")
         lines += ["",
                   "// Whether rays from `origin` along `dir` stay clear of every ground half-space",
@@ -274,7 +278,7 @@ def _light_block(index: int, light: Light, bound, transparent: bool) -> tuple[st
     return "\n".join(lines), needs
 
 
-def _shade_function(scene_ir: SceneIR) -> tuple[str, list[str]]:
+def _shade_function(scene_ir: SceneIR, on: dict[str, bool]) -> tuple[str, list[str]]:
     """Blinn-Phong over every light, with shadows and AO only where asked."""
     scene = scene_ir.scene
     ao = scene.render.ao > 0
@@ -301,17 +305,18 @@ def _shade_function(scene_ir: SceneIR) -> tuple[str, list[str]]:
         lines += ["    // no lights in the scene: a headlight, from the eye along the ray",
                   "    color = v3_add(color, blinn_phong(normal, to_eye, to_eye, albedo, s.specular, "
                   "s.shininess, v3(1.0f, 1.0f, 1.0f)));"]
-    transparent = _scene_features(scene_ir)["TRANSPARENCY"]
     for index, light in enumerate(scene.lights):
-        block, light_needs = _light_block(index, light, scene_ir.bound, transparent)
+        block, light_needs = _light_block(index, light, scene_ir.bound, on["TRANSPARENCY"])
         lines.append(block)
         needs |= light_needs
     lines += ["    return color;", "}"]
     return "\n".join(lines), sorted(needs)
 
 
-def features(render, camera, surface, bounded: bool, half_spaces: bool = False) -> dict[str, bool]:
+def features(scene_ir: SceneIR) -> dict[str, bool]:
     """The template's optional effects, on where the scene uses them."""
+    render, camera, surface, bound = scene_ir.scene.render, scene_ir.scene.camera, scene_ir.surface, scene_ir.bound
+    bounded, half_spaces = bound is not None, bound is not None and bool(bound.half_spaces)
     transparent = not (ir.is_const(surface.transparency) and surface.transparency.value == 0)
     glow = render.glow is not None and render.glow.strength > 0
     step_ao = render.ao > 0 and render.ao_method == "steps"
@@ -347,12 +352,6 @@ def _effect_constants(render, on: dict[str, bool]) -> list[str]:
     if on["REFLECTIONS"]:
         lines.append(f"#define REFLECTIONS {render.reflections}")
     return lines
-
-
-def _scene_features(scene_ir: SceneIR) -> dict[str, bool]:
-    bound = scene_ir.bound
-    return features(scene_ir.scene.render, scene_ir.scene.camera, scene_ir.surface,
-                    bound is not None, bound is not None and bool(bound.half_spaces))
 
 
 _FEATURE_IF = re.compile(r"^#if FEATURE_(\w+)\s*$")
@@ -399,7 +398,7 @@ def lane_block(lanes: int) -> tuple[int, int]:
     return lanes // rows, rows
 
 
-def _constants(scene_ir: SceneIR, target: Target) -> str:
+def _constants(scene_ir: SceneIR, target: Target, on: dict[str, bool]) -> str:
     render = scene_ir.scene.render
     lanes = target.lanes
     width, height = lane_block(lanes)
@@ -421,7 +420,7 @@ def _constants(scene_ir: SceneIR, target: Target) -> str:
         f"#define LANES_Y {height}",
         f"#define LANE_X {lane_vector([i % width for i in range(lanes)])}",
         f"#define LANE_Y {lane_vector([i // width for i in range(lanes)])}",
-        *_effect_constants(render, _scene_features(scene_ir)),
+        *_effect_constants(render, on),
     ])
 
 
@@ -461,8 +460,8 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
     scene = scene_ir.scene
     distance = _FunctionWriter(scene_ir.distance).write(
         "real distance_estimate(vec3 p, __constant scalar *params)")
-    shade, shading_needs = _shade_function(scene_ir)
-    on = _scene_features(scene_ir)
+    on = features(scene_ir)
+    shade, shading_needs = _shade_function(scene_ir, on)
     # the bound serves the march (not with glow) and the shadow rays
     shadows = any(light.shadows != "none" for light in scene.lights)
     bound = ""
@@ -482,7 +481,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         _HEADER.format(version=__version__, file=scene.file, block="{} x {}".format(*lane_block(target.lanes)),
                        real=scalar if target.lanes == 1
                        else f"{scalar}{target.lanes}", lanes=target.lanes, scalar=scalar, params=params),
-        _constants(scene_ir, target),
+        _constants(scene_ir, target, on),
         lib.prelude,
         _library_text(scene_functions),
         "// ---- the scene " + "-" * 60,
