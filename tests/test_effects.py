@@ -608,6 +608,30 @@ def test_hard_shadows_pass_through_transparent_solids():
         assert np.allclose(seen, dark + transparency * (bright - dark), atol=1e-4), transparency
 
 
+@pytest.mark.parametrize("direction", [(0, 0, -1), (0.8, 0, -1), (2, 0, -1), (1, 1.5, -1)])
+def test_a_glass_slab_is_counted_once_whatever_the_light_angle(direction):
+    """A slab of transparency 0.8 (3 x 3 x 0.2, at height 2) under oblique
+    light passes 0.8 of it on every pixel of its shadow: one crossing, one
+    factor (stepping out of a solid by a fixed length once re-entered it:
+    0.64 and 0.512 in patches)."""
+    light = np.array(direction, dtype=np.float64)
+    to_light = -light / np.linalg.norm(light)
+    # straight down onto the middle of the shadow: every pixel is inside it
+    middle = 2 * light[:2] / -light[2]
+    camera = Camera((*middle, 1.2), (*middle, 0), up=(0, 1, 0), fov=40)
+    image = render(f"""
+        material glass {{ color: (0.1, 0.8, 0.1), transparency: 0.8, specular: 0 }}
+        material ground {{ color: (0.8, 0.8, 0.8), specular: 0 }}
+        scene plane().material(ground) | box((3, 3, 0.2)).translate((0, 0, 2)).material(glass)
+        {camera.text()}
+        light directional {{ direction: {vec(direction)}, shadows: hard }}
+        render {{ epsilon: 1e-4, max_distance: 50 }}
+    """)
+    diffuse = 0.8 * to_light[2]                       # the ground's unshadowed direct light
+    visible = (image.rgba[..., 0].astype(np.float64) - AMBIENT * 0.8) / diffuse
+    assert np.abs(visible - 0.8).max() < 1e-4, np.unique(np.round(visible, 3))
+
+
 # ------------------------------------------------------- effects together
 
 @pytest.mark.parametrize("scene", ["mirror", "glass"])

@@ -21,28 +21,30 @@ real hard_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, mask ac
 // `transparency` of the light (straight through: no refraction, no
 // caustics), so the ray steps into it, marches through it by the depth
 // (-d, as `transmitted_color` does) and on from its far side; an opaque
-// solid blocks it. Scenes without transparency keep `hard_shadow`: on
+// solid blocks it. A solid counts once, on the step where the distance
+// first falls below the threshold; the next one counts only after the ray
+// is clear of the surface by the threshold again. (Leaving by a fixed step
+// instead re-entered the same solid under oblique light: a slab counted
+// two to four times.) Scenes without transparency keep `hard_shadow`: on
 // PoCL a longer body in this loop costs more than the steps it saves.
 real hard_shadow_through(vec3 origin, vec3 to_light, real max_t, real threshold, mask active,
                          __constant scalar *params) {
     real t = 2.0f * threshold;
     real visible = 1.0f;
-    mask inside = (mask)0;
+    mask clear_of_surface = MASK_TRUE;
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
         vec3 q = v3_add(origin, v3_scale(to_light, t));
         real d = distance_estimate(q, params);
-        mask entering = active & !inside & (d < threshold);
+        mask entering = active & clear_of_surface & (d < threshold);
         if (ANY(entering)) {
             real clear = SELECT((real)0.0f, surface_at(q, params).transparency, entering);
             visible = SELECT(visible, visible * clear, entering);
             active = active & !(entering & (clear <= 0.0f));
         }
-        mask leaving = inside & (d > -threshold);
-        inside = (inside | entering) & !leaving;
-        // outside: sphere tracing; inside: steps of the depth; across a
-        // surface: twice the threshold
-        real step = SELECT(max(d, threshold), max(-d, threshold), inside);
-        t = t + SELECT(step, 2.0f * threshold, entering | leaving);
+        clear_of_surface = d >= threshold;
+        // outside: sphere tracing; inside: steps of the depth; at least the
+        // threshold across a surface
+        t = t + max(fabs(d), threshold);
         active = active & (t < max_t);
     }
     return visible;
