@@ -19,6 +19,7 @@ from .build import build, open_device
 from .check import RENDER_KEYS, check, check_param_values, check_value
 from .emit import Target, emit
 from .errors import RenderError, SceneError, diagnostic
+from .lanes import CHOICES as LANE_CHOICES
 from .lower import lower
 from .parse import parse
 from .program import Camera, CheckedScene, RenderSettings
@@ -53,10 +54,13 @@ class Scene:
     """A checked scene, ready to compile and render."""
 
     def __init__(self, checked: CheckedScene, params: dict | None = None,
-                 precision: str | None = None, device: str | None = None):
+                 precision: str | None = None, device: str | None = None, lanes: int | None = None):
         precision = precision or checked.render.precision
         if precision not in PRECISIONS:
             raise ValueError(f"precision must be 'float' or 'double', not {precision!r}")
+        if lanes is not None and lanes not in LANE_CHOICES:
+            raise ValueError(f"lanes must be one of {', '.join(map(str, LANE_CHOICES))}, not {lanes!r}")
+        self.lanes = lanes      # rays per work-item; None: the device's (fractalc/lanes.py)
         self.checked = replace(checked, render=replace(checked.render, precision=precision))
         self.device_spec = device
         self._programs: dict = {}    # (compiled settings, lens, target) -> built program
@@ -104,8 +108,13 @@ class Scene:
             device = self.device
             if double and not device.info.double:
                 raise RenderError(f"the OpenCL device '{device.info.name}' does not support double precision")
-            lanes = device.lanes
+            lanes = self.lanes_in_use
         return Target(lanes=lanes, double=double)
+
+    @property
+    def lanes_in_use(self) -> int:
+        """Rays per work-item: the `lanes` given, else the device's."""
+        return self.lanes or self.device.lanes
 
     def kernel_source(self, lanes: int | None = None, **render_keys) -> str:
         """The standalone OpenCL C source (no includes) for this scene."""
@@ -196,13 +205,14 @@ def _file_start():
 
 
 def loads(text: str, params: dict | None = None, precision: str | None = None,
-          device: str | None = None, path: str = "<string>") -> Scene:
-    """Parse and check scene text; raise SceneError on any mistake in it."""
-    return Scene(check(parse(text, path)), params, precision, device)
+          device: str | None = None, path: str = "<string>", lanes: int | None = None) -> Scene:
+    """Parse and check scene text; raise SceneError on any mistake in it.
+    `lanes` (1, 2, 4, 8, 16) overrides the rays per work-item."""
+    return Scene(check(parse(text, path)), params, precision, device, lanes)
 
 
 def load(path: str | os.PathLike, params: dict | None = None, precision: str | None = None,
-         device: str | None = None) -> Scene:
+         device: str | None = None, lanes: int | None = None) -> Scene:
     """Read, parse and check a .frac file."""
     path = os.fspath(path)
     try:
@@ -210,4 +220,4 @@ def load(path: str | os.PathLike, params: dict | None = None, precision: str | N
             data = f.read(8 * 1024 * 1024 + 1)
     except OSError as error:
         raise RenderError(f"cannot read {path}: {error.strerror}") from None
-    return loads(data.decode("utf-8", errors="replace"), params, precision, device, path)
+    return loads(data.decode("utf-8", errors="replace"), params, precision, device, path, lanes)

@@ -157,7 +157,7 @@ def bench(scene: Scene, frames: int = 30, width: int | None = None, height: int 
         scene=scene.checked.file, path="still" if still else "path" if scene.checked.path else "orbit",
         width=width, height=height, frames=frames, repeat=repeat,
         compile_seconds=compile_seconds, **medians, **machine(scene), precision=scene.precision,
-        lanes=scene.device.lanes)
+        lanes=scene.lanes_in_use)
 
 
 def table(result: BenchResult) -> str:

@@ -80,7 +80,7 @@ def command_render(args) -> int:
 
 def command_compile(args) -> int:
     scene = _load(args)
-    _write_text_atomically(args.output, scene.kernel_source(lanes=args.lanes))
+    _write_text_atomically(args.output, scene.kernel_source())
     return 0
 
 
@@ -99,13 +99,19 @@ def command_check(args) -> int:
 
 def command_devices(args) -> int:
     from .build import list_devices
+    from .lanes import choose, describe
     devices = list_devices()
     if not devices:
         from .build import INSTALL_HINT
         raise RenderError(INSTALL_HINT)
     for d in devices:
+        try:
+            lanes = describe(choose(d, refresh=args.probe))
+        except RenderError as error:
+            lanes = f"unusable: {error}"
         print(f"{d.index}: {d.name} [{d.kind}] on {d.platform}; {d.version}; "
-              f"{d.compute_units} compute units; double: {'yes' if d.double else 'no'}")
+              f"{d.compute_units} compute units; double: {'yes' if d.double else 'no'}; "
+              f"rays per work-item: {lanes}")
     return 0
 
 
@@ -233,6 +239,10 @@ def _parser() -> argparse.ArgumentParser:
                        help="arithmetic of the whole kernel (default: the file's, else float)")
         p.add_argument("--device", help="OpenCL device: index, name substring, 'cpu' or 'gpu' "
                                         "(see 'fractalc devices'; also $FRACTALC_DEVICE)")
+        p.add_argument("--lanes", help="rays per work-item: 1, 2, 4, 8 or 16 (default: the widest the "
+                                       "device builds and runs, see 'fractalc devices'; also $FRACTALC_LANES)")
+        p.add_argument("--verbose", action="store_true",
+                       help="show the OpenCL compiler's warnings (also $FRACTALC_VERBOSE=1)")
 
     def image_options(p):
         p.add_argument("--width", type=int)
@@ -255,8 +265,6 @@ def _parser() -> argparse.ArgumentParser:
                                                "(no includes; the kernel signature is documented at its top).")
     compile_.add_argument("scene")
     compile_.add_argument("-o", "--output", required=True, help="output .cl file")
-    compile_.add_argument("--lanes", type=int, choices=(1, 2, 4, 8, 16),
-                          help="rays per work-item (default: the device's, 16 on CPUs, 1 on GPUs)")
     device_options(compile_)
     compile_.set_defaults(run=command_compile)
 
@@ -326,9 +334,31 @@ def _parser() -> argparse.ArgumentParser:
     image_options(animate)
     animate.set_defaults(run=command_animate)
 
-    devices = commands.add_parser("devices", help="list OpenCL devices")
+    devices = commands.add_parser("devices", help="list OpenCL devices and the rays per work-item of each",
+                                  description="List the OpenCL devices. For each CPU device, the rays "
+                                              "per work-item (vector lanes) are the widest width its "
+                                              "driver builds and runs, found by a probe in a child "
+                                              "process and remembered.")
+    devices.add_argument("--probe", action="store_true", help="probe every device again")
     devices.set_defaults(run=command_devices)
     return parser
+
+
+def _apply_environment_options(args) -> None:
+    """--lanes and --verbose act through their environment variables (so
+    that every stage, and the viewer's reloads, see them); both checked
+    here, before any work."""
+    from .build import VERBOSE_ENVIRONMENT
+    from .lanes import ENVIRONMENT, parse_lanes
+    try:
+        if getattr(args, "lanes", None) is not None:
+            os.environ[ENVIRONMENT] = str(parse_lanes(args.lanes, "--lanes"))
+        elif os.environ.get(ENVIRONMENT):
+            parse_lanes(os.environ[ENVIRONMENT], ENVIRONMENT)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    if getattr(args, "verbose", False):
+        os.environ[VERBOSE_ENVIRONMENT] = "1"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -339,6 +369,7 @@ def main(argv: list[str] | None = None) -> int:
         os.environ["POCL_KERNEL_CACHE"] = "0"
         os.environ["PYOPENCL_NO_CACHE"] = "1"
     try:
+        _apply_environment_options(args)
         return args.run(args)
     except SceneError as error:
         print(error, file=sys.stderr)
@@ -357,6 +388,39 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("fractalc: interrupted", file=sys.stderr)
         return 130
+
+
+SUPERVISED_ENVIRONMENT = "FRACTALC_SUPERVISED"
+_CRASH_SIGNALS = ("SIGSEGV", "SIGBUS", "SIGILL", "SIGABRT", "SIGFPE")
+
+
+def _child_command(argv: list[str]) -> list[str]:
+    return [sys.executable, "-m", "fractalc", *argv]
+
+
+def entry() -> int:
+    """The `fractalc` command: `main` in a child process, so that a crash
+    inside the OpenCL driver, which no Python code can catch, still ends in
+    a one-line error that says what to do."""
+    import signal
+    import subprocess
+    if os.environ.get(SUPERVISED_ENVIRONMENT):
+        return main()
+    child = subprocess.Popen(_child_command(sys.argv[1:]), env=dict(os.environ, **{SUPERVISED_ENVIRONMENT: "1"}))
+    # Ctrl-C reaches the child from the terminal; a signal sent to this
+    # process alone is passed on
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for name in ("SIGTERM", "SIGHUP"):
+        signal.signal(getattr(signal, name), lambda number, frame: child.send_signal(number))
+    code = child.wait()
+    if code >= 0:
+        return code
+    name = signal.Signals(-code).name
+    if name in _CRASH_SIGNALS:
+        print(f"fractalc: error: the OpenCL driver crashed ({name}); run 'fractalc devices --probe', or set "
+              "FRACTALC_LANES=8 (or 4, 1) and try again", file=sys.stderr)
+        return 1
+    return 128 - code
 
 
 if __name__ == "__main__":

@@ -493,12 +493,15 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         resolve_features(lib.template, on),
     ]
     source = "\n\n".join(p.strip("\n") for p in parts if p) + "\n"
-    if target.double:
-        source = _DOUBLE_LITERAL.sub(r"\1", source)
-    return source
+    return double_literals(source) if target.double else source
 
 
-_DOUBLE_LITERAL = re.compile(r"\b((?:\d+\.\d*|\.\d+)(?:[eE][+-]?\d+)?|\d+[eE][+-]?\d+)f\b")
+_FLOAT_LITERAL = re.compile(r"\b((?:\d+\.\d*|\.\d+)(?:[eE][+-]?\d+)?|\d+[eE][+-]?\d+)f\b")
+
+
+def double_literals(source: str) -> str:
+    """`source` with its `f` suffixes stripped: every literal a double."""
+    return _FLOAT_LITERAL.sub(r"\1", source)
 
 
 def _library_text(functions) -> str:

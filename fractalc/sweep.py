@@ -69,7 +69,7 @@ def scene_settings(scene: Scene) -> dict:
     row repeats the scene's kernel)."""
     settings = {knob: getattr(scene.checked.render, knob) for knob in KNOBS}
     if settings["fast_math"] == "auto":
-        native = fast_math("auto", Target(lanes=scene.device.lanes))
+        native = fast_math("auto", Target(lanes=scene.lanes_in_use))
         settings["fast_math"] = "on" if native else "off"
     return settings
 
