@@ -11,6 +11,17 @@
 
 #define PROBE_RESULTS 32
 
+#if PRECISION_DOUBLE
+// OpenCL's native_ functions are float-only: in double their rows repeat
+// the exact functions
+#define native_sqrt sqrt
+#define native_rsqrt rsqrt
+#define native_sin sin
+#define native_cos cos
+#define native_exp exp
+#define native_log log
+#endif
+
 __kernel void probe(__global const scalar *in, __global scalar *out, int count) {
     int i = get_global_id(0);
     real x = LOAD_LANES(i, in);
@@ -41,23 +52,12 @@ __kernel void probe(__global const scalar *in, __global scalar *out, int count) 
     results[21] = sincos(x, &cosine) + cosine;
     results[22] = SELECT(x, y, x < 0.5f);
     results[23] = ceil(4.0f * x);
-#if PRECISION_DOUBLE
-    // OpenCL's native_ functions are float-only: the double rows repeat
-    // the exact ones
-    results[24] = sqrt(x);
-    results[25] = rsqrt(x);
-    results[26] = sin(x);
-    results[27] = cos(x);
-    results[28] = exp(x);
-    results[29] = log(y);
-#else
     results[24] = native_sqrt(x);
     results[25] = native_rsqrt(x);
     results[26] = native_sin(x);
     results[27] = native_cos(x);
     results[28] = native_exp(x);
     results[29] = native_log(y);
-#endif
     // a masked loop, as the march runs it: z -> z^2 + x until |z| > 2
     real z = 0.0f, steps = 0.0f;
     mask active = MASK_TRUE;
