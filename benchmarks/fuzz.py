@@ -1,0 +1,97 @@
+"""The long fuzzing run (issue 10); tests/test_fuzz.py is its one-minute form.
+
+    python benchmarks/fuzz.py --minutes 10 --seed 1 [--build-every 20] [--out fuzz-failures]
+    python benchmarks/fuzz.py --seed 1 --case 123      # replay one case, print it and its verdict
+
+Judges cases seed:0, seed:1, ... (tests/fuzz_scenes.py): every case is
+checked; every `--build-every`-th one that checks is also built and rendered
+16x12. Prints the counts (tried, checked, rejected, rendered, failures) as it
+goes and at the end. The first failure of each kind (`fuzz_scenes.signature`)
+is shrunk to a small repro, written to OUT/NNN.frac with OUT/NNN.txt saying what
+failed; later ones of the same kind are only counted.
+"""
+from __future__ import annotations
+
+import argparse
+import collections
+import sys
+import time
+import warnings
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+import fuzz_scenes  # noqa: E402
+
+
+def replay(seed: int, index: int, build: bool) -> None:
+    case = fuzz_scenes.case(seed, index)
+    print(f"# case {index} of seed {seed}: {case.origin} (expected: {case.expect}, defect at {case.where})")
+    print(case.source if isinstance(case.source, str) else repr(case.source))
+    verdict = fuzz_scenes.judge(case, build=build)
+    print(f"# verdict: {verdict.outcome} {verdict.failure}\n{verdict.detail}")
+
+
+def write_repro(out: Path, number: int, case, verdict, shrunk, seed: int, index: int) -> Path:
+    out.mkdir(parents=True, exist_ok=True)
+    stem = out / f"{number:03d}"
+    stem.with_suffix(".frac").write_bytes(shrunk.source if isinstance(shrunk.source, bytes)
+                                          else shrunk.source.encode("utf-8", "surrogatepass"))
+    stem.with_suffix(".txt").write_text(
+        f"{fuzz_scenes.signature(verdict)}\nseed {seed}, case {index}: {case.origin}\n"
+        f"replay: python benchmarks/fuzz.py --seed {seed} --case {index}\n\n{verdict.detail}\n")
+    return stem.with_suffix(".frac")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, default=10)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--build-every", type=int, default=10, metavar="N",
+                        help="build and render every N-th case that checks (0: never)")
+    parser.add_argument("--out", type=Path, default=Path("fuzz-failures"))
+    parser.add_argument("--case", type=int, help="replay this one case and stop")
+    args = parser.parse_args(argv)
+    warnings.simplefilter("ignore")     # the OpenCL compiler's chatter
+    if args.case is not None:
+        replay(args.seed, args.case, build=args.build_every != 0)
+        return 0
+
+    counts = collections.Counter()
+    kinds: dict[str, int] = {}          # failure signature -> how many
+    deadline = time.monotonic() + args.minutes * 60
+    last_print = time.monotonic()
+    index = 0
+    while time.monotonic() < deadline:
+        case = fuzz_scenes.case(args.seed, index)
+        verdict = fuzz_scenes.judge(case, build=False)
+        counts["tried"] += 1
+        counts[verdict.outcome] += 1      # checked, rejected or failed
+        if verdict.outcome == "checked" and args.build_every and (counts["checked"] - 1) % args.build_every == 0:
+            verdict = fuzz_scenes.judge(case, build=True)
+            counts["built"] += 1
+            counts[verdict.outcome] += 1  # rendered or failed
+        if verdict.failure:
+            kind = fuzz_scenes.signature(verdict)
+            kinds[kind] = kinds.get(kind, 0) + 1
+            if kinds[kind] == 1:
+                built = verdict.failure not in ("misplaced error", "defect not reported", "valid scene rejected",
+                                                "traceback while checking", "hang while checking")
+                expected = case.expect != "unknown" or case.where
+                shrunk = case if expected else fuzz_scenes.shrink(case, verdict, build=built,
+                                                                    tries=60 if built else 400)
+                path = write_repro(args.out, len(kinds), case, verdict, shrunk, args.seed, index)
+                print(f"NEW {path}: {kind} (case {index})", flush=True)
+        index += 1
+        if time.monotonic() - last_print > 30:
+            last_print = time.monotonic()
+            print(f"{dict(counts)}, {len(kinds)} kinds of failure", flush=True)
+    print(f"seed {args.seed}, {args.minutes:g} min: tried {counts['tried']}, checked {counts['checked']}, "
+          f"rejected {counts['rejected']}, built {counts['built']}, rendered {counts['rendered']}, "
+          f"failed {counts['failed']} ({len(kinds)} kinds)")
+    for kind, n in sorted(kinds.items(), key=lambda item: -item[1]):
+        print(f"{n:6d}  {kind}")
+    return 1 if kinds else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
