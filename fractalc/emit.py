@@ -50,15 +50,27 @@ _C_OPS = {
     "min": lambda a, b: f"fmin({a}, {b})",
     "max": lambda a, b: f"fmax({a}, {b})",
 }
+# C types of temporaries: per-ray values, and uniform ones (params and
+# constants only), which stay scalars
 _C_TYPES = {ir.REAL: "real", ir.VEC3: "vec3", ir.INT: "lane_int", ir.MASK: "mask"}
-_TEMP_PREFIX = {ir.REAL: "r", ir.VEC3: "q", ir.INT: "id", ir.MASK: "m"}
+_UNIFORM_C_TYPES = {ir.REAL: "scalar", ir.INT: "int", ir.MASK: "int"}
+_TEMP_PREFIX = {"real": "r", "vec3": "q", "lane_int": "id", "mask": "m", "scalar": "u", "int": "k"}
 _C_AXES = "xyz"
+# Expressions nest at most this deep before a temporary is named: clang
+# refuses more than 256 nested brackets, and each level costs up to four
+# (SELECT expands to a call with parenthesised arguments)
+MAX_INLINE_DEPTH = 32
 
 
 class _FunctionWriter:
     """Writes one C function computing an IR expression of the point: nodes
-    used more than once and library calls get a named temporary, the rest
-    is inlined."""
+    used more than once, library calls and expressions nested deeper than
+    MAX_INLINE_DEPTH get a named temporary, the rest is inlined.
+
+    A node is uniform where it depends on params and constants only: it is
+    computed as a `scalar` (or `int`). Everything else (the point, library
+    calls, which take and return `real`) is per ray; a per-ray node's
+    uniform arguments are widened where C's overloads need one type."""
 
     def __init__(self, root: ir.Expr):
         self.root = root
@@ -69,9 +81,11 @@ class _FunctionWriter:
                 self.uses[child] = self.uses.get(child, 0) + 1
         self.varying = set()
         for node in self.nodes:
-            if isinstance(node, ir.Var) or any(c in self.varying for c in ir.children(node)):
+            if isinstance(node, (ir.Var, ir.Call, ir.Bounded)) \
+                    or any(c in self.varying for c in ir.children(node)):
                 self.varying.add(node)
         self.text: dict = {}
+        self.depth: dict = {}      # how deeply a node's inlined text nests
         self.lines: list[str] = []
         self.counts: dict[str, int] = {}
 
@@ -80,7 +94,7 @@ class _FunctionWriter:
             return False
         if isinstance(node, ir.Comp):
             return not isinstance(node.vector, (ir.Var, ir.Call))
-        return isinstance(node, ir.Call) or self.uses.get(node, 0) > 1
+        return isinstance(node, ir.Call) or self.uses.get(node, 0) > 1 or self.depth[node] > MAX_INLINE_DEPTH
 
     def argument(self, node, c_type: str = "real") -> str:
         """A value passed to a function: uniform scalars widened to `real`
@@ -92,7 +106,7 @@ class _FunctionWriter:
             return f"(int){text}"
         if node not in self.varying and node.type == ir.REAL:
             return f"(real){text}"
-        if node not in self.varying and node.type == ir.INT:
+        if node not in self.varying and node.type in (ir.INT, ir.MASK):
             return f"(lane_int){text}"
         return text
 
@@ -125,11 +139,18 @@ class _FunctionWriter:
             return f"v3({', '.join(self.argument(c) for c in items)})"
         if isinstance(node, ir.Call):
             return f"{node.function}({', '.join(self.call_arguments(node))})"
+        # a uniform node's arguments are all scalars: no conversions
+        value = self.argument if node in self.varying else self.text.__getitem__
+        if node.op == "select":
+            condition, if_true, if_false = node.args
+            if condition in self.varying:
+                return f"SELECT({value(if_false)}, {value(if_true)}, {self.text[condition]})"
+            # a uniform condition is a scalar int: C's conditional takes it
+            return f"({self.text[condition]} ? {value(if_true)} : {value(if_false)})"
         if node.op in _C_OPS:
-            args = [self.argument(a) if node.op in ("select", "min", "max", "abs") else self.text[a]
-                    for a in node.args]
+            args = [value(a) if node.op in ("min", "max", "abs") else self.text[a] for a in node.args]
             return _C_OPS[node.op](*args)
-        return f"{node.op}({', '.join(self.argument(a) for a in node.args)})"
+        return f"{node.op}({', '.join(value(a) for a in node.args)})"
 
     def block(self, root, indent: str) -> None:
         """Emit the statements computing `root`; a `Bounded` node's inner
@@ -142,19 +163,26 @@ class _FunctionWriter:
                 self.bounded(node, indent)
                 continue
             text = self.expression(node)
+            self.depth[node] = 1 + max((self.depth.get(c, 0) for c in ir.children(node)), default=0)
             if self.named(node) and node is not self.root:
-                text = self.declare(node.type, text, indent)
+                text = self.declare(self.c_type(node), text, indent)
+                self.depth[node] = 0
             self.text[node] = text
 
-    def declare(self, type_: str, text: str, indent: str) -> str:
-        prefix = _TEMP_PREFIX[type_]
+    def c_type(self, node) -> str:
+        if node in self.varying or node.type == ir.VEC3:
+            return _C_TYPES[node.type]
+        return _UNIFORM_C_TYPES[node.type]
+
+    def declare(self, c_type: str, text: str, indent: str) -> str:
+        prefix = _TEMP_PREFIX[c_type]
         name = f"{prefix}{self.counts.get(prefix, 0)}"
         self.counts[prefix] = self.counts.get(prefix, 0) + 1
-        self.lines.append(f"{indent}{_C_TYPES[type_]} {name} = {text};")
+        self.lines.append(f"{indent}{c_type} {name} = {text};")
         return name
 
     def bounded(self, node: ir.Bounded, indent: str) -> None:
-        name = self.declare(ir.REAL, self.argument(node.bound), indent)
+        name = self.declare("real", self.argument(node.bound), indent)
         near = f"({name} < {self.text[node.margin]})"
         self.lines.append(f"{indent}if (ANY{near}) {{   // near the bound: evaluate what it bounds")
         outside = dict(self.text)
@@ -163,6 +191,7 @@ class _FunctionWriter:
         self.lines.append(f"{indent}}}")
         self.text = outside   # temporaries of the block are out of scope
         self.text[node] = name
+        self.depth[node] = 0
 
     def write(self, signature: str) -> str:
         self.block(self.root, "    ")

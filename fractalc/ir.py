@@ -13,39 +13,47 @@ which fold constants: an expression with no `Param` or `Var` in it is a
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass, fields
 from typing import Callable, Union
 
 REAL, INT, MASK, VEC3 = "real", "int", "mask", "vec3"
 
 
-def node(cls):
-    """A frozen dataclass whose hash is computed once: the IR is a DAG that
-    is hashed at every lookup, and a recursive hash would make that
-    quadratic in its depth."""
-    cls = dataclass(frozen=True)(cls)
-    names = tuple(f.name for f in fields(cls))
+class _Interned(type):
+    """Hash-consing: constructing a node equal to a live one returns that
+    one. Equal nodes are then the same object, so comparing and hashing
+    are by identity and never walk a subtree, however deep the DAG."""
 
-    def cached_hash(self):
-        try:
-            return self.__dict__["_hash"]
-        except KeyError:
-            value = hash((cls.__name__,) + tuple(getattr(self, n) for n in names))
-            object.__setattr__(self, "_hash", value)
-            return value
+    def __call__(cls, *args, **kwargs):
+        made = super().__call__(*args, **kwargs)
+        key = (cls,) + tuple(_key(getattr(made, f.name)) for f in fields(made))
+        return _NODES.setdefault(key, made)
 
-    cls.__hash__ = cached_hash
-    return cls
+
+def _key(value):
+    # -0.0 == 0.0 in Python, but they are different constants
+    return (value, math.copysign(1.0, value)) if isinstance(value, float) else value
+
+
+_NODES: weakref.WeakValueDictionary = weakref.WeakValueDictionary()
+
+
+class _Node(metaclass=_Interned):
+    pass
+
+
+node = dataclass(frozen=True, eq=False)
 
 
 @node
-class Const:
+class Const(_Node):
     value: float
     type: str = REAL
 
 
 @node
-class Param:
+class Param(_Node):
     """A scene `param`: a kernel argument, uniform over all rays."""
     index: int
     name: str
@@ -53,13 +61,13 @@ class Param:
 
 
 @node
-class Var:
+class Var(_Node):
     name: str
     type: str
 
 
 @node
-class Op:
+class Op(_Node):
     """A built-in operation: arithmetic, a math function, a comparison or
     `select(condition, if_true, if_false)`."""
     op: str
@@ -68,7 +76,7 @@ class Op:
 
 
 @node
-class Call:
+class Call(_Node):
     """A call of an OpenCL library function from `stdlib_cl/`."""
     function: str
     args: tuple["Arg", ...]
@@ -76,7 +84,7 @@ class Call:
 
 
 @node
-class Comp:
+class Comp(_Node):
     """Component `index` (0..2) of a vec3-valued expression."""
     vector: "Expr"
     index: int
@@ -84,7 +92,7 @@ class Comp:
 
 
 @node
-class Vec:
+class Vec(_Node):
     """A vector of scalar expressions (2 to 4 components)."""
     items: tuple["Expr", ...]
 
@@ -93,7 +101,7 @@ class Vec:
 
 
 @node
-class Bounded:
+class Bounded(_Node):
     """`inner` where `bound < margin`, else `bound`: a conservative bounding
     distance that spares evaluating `inner` (a fractal) far from it. Both
     are lower bounds of the true distance, so either is a safe step."""
