@@ -257,6 +257,55 @@ def test_soft_shadow_penumbra_widens_as_softness_falls():
     assert widths[8] > 8 * 5.0 * SHADOW_CAMERA.pixel_angle
 
 
+# A box hollowed by a ball: concave surfaces, and a distance with kinks
+# where the box's and the ball's distances meet (CSG), seen into its holes.
+HOLLOW_CAMERA = Camera((2.2, -2.6, 2.0), (0, 0, 0), fov=22)
+HOLLOW_LIGHT = np.array([-0.4, 0.6, -1.0])
+HOLLOW_EPSILON = 1e-3
+
+
+def _hollow_box_distance(p):
+    q = np.abs(p) - 0.6
+    box = np.linalg.norm(np.maximum(q, 0), axis=-1) + np.minimum(q.max(axis=-1), 0)
+    return np.maximum(box, 0.75 - np.linalg.norm(p, axis=-1))
+
+
+def test_soft_shadow_on_concave_surfaces_is_the_smallest_ratio_along_the_ray():
+    """The penumbra on the hollow box is min_t k d(t) / t taken densely
+    along each shadow ray (from the hit point lifted by twice the threshold,
+    as the kernel does), on every pixel, and so varies as smoothly as that:
+    read off the sphere-tracing samples alone it was grainy (errors up to
+    0.19 jumping between neighbouring pixels: 0.16 of excess second
+    difference where now 0.014)."""
+    k = 8
+    image = render(f"""
+        material matte {{ color: (0.8, 0.8, 0.8), specular: 0 }}
+        scene (box(1.2) - sphere(0.75)).material(matte)
+        {HOLLOW_CAMERA.text()}
+        light directional {{ direction: {vec(HOLLOW_LIGHT)}, shadows: soft, softness: {k} }}
+        render {{ epsilon: {HOLLOW_EPSILON}, dither: 0 }}
+    """)
+    to_light = -HOLLOW_LIGHT / np.linalg.norm(HOLLOW_LIGHT)
+    facing = image.normal.astype(np.float64) @ to_light
+    lit = np.isfinite(image.depth) & (facing > 0.05)
+    visible = (image.rgba[..., 0] - AMBIENT * 0.8) / (0.8 * np.where(lit, facing, 1))
+    origins = HOLLOW_CAMERA.hit_points(image) + image.normal * 2 * HOLLOW_EPSILON
+    exact = np.full(lit.shape, np.inf)
+    for t in np.geomspace(2 * HOLLOW_EPSILON, 4, 3000):
+        exact = np.minimum(exact, k * _hollow_box_distance(origins + to_light * t) / t)
+    exact = np.clip(exact, 0, 1)
+    penumbra = lit & (exact > 0.02) & (exact < 0.98)
+    assert penumbra.sum() > 100 and (lit & (exact == 1)).sum() > 500 and (lit & (exact == 0)).sum() > 50
+    error = np.abs(visible - exact)[lit]
+    assert np.quantile(error, 0.99) < 0.02 and error.max() < 0.05, (np.quantile(error, 0.99), error.max())
+    # fully lit and fully shadowed stay so
+    assert np.all(visible[lit & (exact == 1)] > 1 - 1e-5) and np.all(visible[lit & (exact == 0)] < 1e-5)
+    # smooth along rows: the second difference is the reference's, within noise
+    rows = lit[:, 2:] & lit[:, 1:-1] & lit[:, :-2] & penumbra[:, 1:-1]
+    excess = np.abs(np.diff(visible, 2, axis=1) - np.diff(exact, 2, axis=1))[rows]
+    assert np.quantile(excess, 0.95) < 0.03, np.quantile(excess, 0.95)
+
+
 # ---------------------------------------------------------------------- glow
 
 GLOW_CAMERA = Camera((0, -5.0, 0), (0, 0, 0), fov=40)

@@ -50,17 +50,57 @@ real hard_shadow_through(vec3 origin, vec3 to_light, real max_t, real threshold,
     return visible;
 }
 
+// The smallest d / t along the shadow ray on [a, c], where the sample at b
+// inside it, `ratio` = d(b) / b, is below both ends: halvings of the
+// bracket about its lowest point, two evaluations each.
+real lowest_ratio(vec3 origin, vec3 to_light, real a, real b, real c, real ratio,
+                  __constant scalar *params) {
+    for (int i = 0; i < 4; i++) {
+        real left = 0.5f * (a + b), right = 0.5f * (b + c);
+        real at_left = distance_estimate(v3_add(origin, v3_scale(to_light, left)), params) / left;
+        real at_right = distance_estimate(v3_add(origin, v3_scale(to_light, right)), params) / right;
+        mask to_left = at_left < ratio;
+        mask to_right = !to_left & (at_right < ratio);
+        // [a, b] about left, [b, c] about right, or [left, right] about b
+        a = SELECT(SELECT(left, b, to_right), a, to_left);
+        c = SELECT(SELECT(right, c, to_right), b, to_left);
+        b = SELECT(SELECT(b, right, to_right), left, to_left);
+        ratio = SELECT(SELECT(ratio, at_right, to_right), at_left, to_left);
+    }
+    return ratio;
+}
+
 // Soft shadow, after Quilez ("penumbra"): the smallest k * d / t along the
 // ray, so rays that graze an occluder are partly lit; larger k, harder edge.
+// The smallest d / t lies between samples, and where sphere tracing samples
+// jumps from pixel to pixel: read off the samples, the penumbra is grainy
+// wherever the distance has a kink there (the edges of CSG, concave
+// surfaces). So a local minimum of the samples' d / t, where the light may
+// be dimmed (k d / t < 2: by the distance's slope of at most 1, less than
+// half the sample's d / t cannot lie between its neighbours), is refined
+// (`lowest_ratio`).
 real soft_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, real k, mask active,
                  __constant scalar *params) {
     real t = 2.0f * threshold;
     real visible = 1.0f;
+    // the previous two samples: ray distances and d / t
+    real t_before = t, t_last = t;
+    real ratio_before = (real)1e30f, ratio_last = (real)1e30f;
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
         real d = distance_estimate(v3_add(origin, v3_scale(to_light, t)), params);
-        visible = SELECT(visible, min(visible, k * d / t), active);
+        real ratio = d / t;
+        visible = SELECT(visible, min(visible, k * ratio), active);
+        mask dip = active & (ratio_last <= ratio_before) & (ratio_last <= ratio) & (k * ratio_last < 2.0f);
+        if (ANY(dip)) {
+            real lowest = lowest_ratio(origin, to_light, t_before, t_last, t, ratio_last, params);
+            visible = SELECT(visible, min(visible, k * lowest), dip);
+        }
         mask blocked = active & (d < threshold);
         visible = SELECT(visible, (real)0.0f, blocked);
+        t_before = t_last;
+        ratio_before = ratio_last;
+        t_last = t;
+        ratio_last = ratio;
         t = t + max(d, threshold);
         active = active & !blocked & (t < max_t);
     }
