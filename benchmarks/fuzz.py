@@ -23,6 +23,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 import fuzz_scenes  # noqa: E402
 
 
+EXPECTATIONS = ("defect not reported", "valid scene rejected")
+CHECKING = ("misplaced error", "traceback while checking", "hang while checking", *EXPECTATIONS)
+
+
 def replay(seed: int, index: int, build: bool) -> None:
     case = fuzz_scenes.case(seed, index)
     print(f"# case {index} of seed {seed}: {case.origin} (expected: {case.expect}, defect at {case.where})")
@@ -35,7 +39,7 @@ def write_repro(out: Path, number: int, case, verdict, shrunk, seed: int, index:
     out.mkdir(parents=True, exist_ok=True)
     stem = out / f"{number:03d}"
     stem.with_suffix(".frac").write_bytes(shrunk.source if isinstance(shrunk.source, bytes)
-                                          else shrunk.source.encode("utf-8", "surrogatepass"))
+                                          else shrunk.source.encode())
     stem.with_suffix(".txt").write_text(
         f"{fuzz_scenes.signature(verdict)}\nseed {seed}, case {index}: {case.origin}\n"
         f"replay: python benchmarks/fuzz.py --seed {seed} --case {index}\n\n{verdict.detail}\n")
@@ -74,9 +78,9 @@ def main(argv=None) -> int:
             kind = fuzz_scenes.signature(verdict)
             kinds[kind] = kinds.get(kind, 0) + 1
             if kinds[kind] == 1:
-                built = verdict.failure not in ("misplaced error", "defect not reported", "valid scene rejected",
-                                                "traceback while checking", "hang while checking")
-                expected = case.expect != "unknown" or case.where
+                # failures of an expectation (where the defect is, valid or not) keep the generated scene
+                expected = verdict.failure in EXPECTATIONS or case.where
+                built = verdict.failure not in CHECKING
                 shrunk = case if expected else fuzz_scenes.shrink(case, verdict, build=built,
                                                                     tries=60 if built else 400)
                 path = write_repro(args.out, len(kinds), case, verdict, shrunk, args.seed, index)

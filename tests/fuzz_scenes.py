@@ -360,8 +360,6 @@ class _Generator:
         table = FRACTALS if rng.random() < 0.35 else PRIMITIVES
         name = rng.choice(list(table))
         spec = table[name]
-        if name in ("mandelbulb", "julia"):     # keep renders cheap: few iterations
-            spec = tuple((n, k, Range(1, 30, whole=True)) if n == "iterations" else (n, k, r) for n, k, r in spec)
         if self.take_defect(0.03):
             self.made = "unknown function"
             return f"{self.mark(name + 'z')}({self.arguments(spec, name)})"
@@ -398,7 +396,7 @@ class _Generator:
     def smooth(self) -> str:
         if self.rng.random() < 0.2:
             return self.param_for(Range(0.01, 1))
-        return self.number(Range(0, 2), params_ok=False)
+        return self.number(Range(0, 2, limit=NON_NEGATIVE), params_ok=False)
 
     def transform(self, text: str) -> str:
         rng = self.rng
@@ -462,11 +460,11 @@ class _Generator:
             if rng.random() < 0.4:
                 entries.append(f"{key}: {rng.choice(choices)}")
         rng.shuffle(entries)
-        if self.take_defect(0.08) and keys:
+        if keys and self.take_defect(0.08):
             key = rng.choice(list(keys))
             entries.append(self.mark(rng.choice([f"{key}x", "wibble"])) + ": 1")
             self.made = "unknown key"
-        elif self.take_defect(0.05) and entries:
+        elif entries and self.take_defect(0.05):
             first = entries[0].split(":")[0]
             entries.append(self.mark(first) + ": " + entries[0].split(":", 1)[1].strip())
             self.made = "key given twice"
@@ -863,12 +861,36 @@ def judge(case: Case, build: bool) -> Verdict:
         with time_limit(HANG_SECONDS * 3):
             image = scene.render(**keys)
             distances = scene.distance(np.array(POINTS, dtype=np.float64))
+            problems = _non_finite(image, distances)
+            for end in ("low", "high"):   # params at the ends of their ranges: no rebuild
+                values = {p.name: getattr(p, end) for p in scene.checked.params if getattr(p, end) is not None}
+                if values and not problems and _accepts(scene, values):
+                    problems = [f"with params {values}: {p}" for p in
+                                _non_finite(scene.render(**keys), scene.distance(np.array(POINTS)))]
     except CaseTimeout:
         return Verdict("failed", "hang while building or rendering", f"over {HANG_SECONDS * 3} s")
     except fractalc.RenderError as error:
         return Verdict("failed", "render error", str(error).splitlines()[0])
     except Exception as error:  # noqa: BLE001
         return Verdict("failed", "traceback while rendering", f"{type(error).__name__}: {error}")
+    if problems:
+        return Verdict("failed", "non-finite output", "; ".join(problems))
+    return Verdict("rendered")
+
+
+def _accepts(scene, values: dict) -> bool:
+    """Set the params if these values are valid together (each alone is in range)."""
+    import fractalc
+    try:
+        scene.set_params(values)
+    except fractalc.SceneError:
+        return False
+    return True
+
+
+def _non_finite(image, distances) -> list[str]:
+    """What is not finite in a render and the distances at POINTS (Z may be +inf)."""
+    import numpy as np
     problems = []
     for what, values in (("rgba", image.rgba), ("normal", image.normal), ("steps", image.steps)):
         bad = ~np.isfinite(values)
@@ -880,9 +902,7 @@ def judge(case: Case, build: bool) -> Verdict:
         problems.append(f"Z: {int(bad.sum())} values neither >= 0 nor +inf, e.g. {depth[bad][:3]}")
     if not np.isfinite(distances).all():
         problems.append(f"distance() at {POINTS}: {distances}")
-    if problems:
-        return Verdict("failed", "non-finite output", "; ".join(problems))
-    return Verdict("rendered")
+    return problems
 
 
 # ---- shrinking a failing case -------------------------------------------------------
@@ -891,7 +911,7 @@ def signature(verdict: Verdict) -> str:
     """What makes two failures the same: the category and the gist of the detail."""
     gist = verdict.detail.splitlines()[0] if verdict.detail else ""
     gist = re.sub(r"^\S*:\d+:\d+: error: ", "", gist)
-    gist = re.sub(r"'[^']*'|\[[^\]]*\]|[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|nan|inf", "_", gist)
+    gist = re.sub(r"'[^']*'|\"[^\"]*\"|\[[^\]]*\]|[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|nan|inf", "_", gist)
     return f"{verdict.failure}: {gist[:90]}"
 
 

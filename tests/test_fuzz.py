@@ -69,7 +69,7 @@ def test_scenes_that_check_render_finite_images():
 def test_the_check_command_answers_like_the_api(index, tmp_path, capsys):
     case = fuzz_scenes.case(SEED + 2, index)
     path = tmp_path / "fuzz scene.frac"
-    data = case.source if isinstance(case.source, bytes) else case.source.encode("utf-8", "surrogatepass")
+    data = case.source if isinstance(case.source, bytes) else case.source.encode()
     path.write_bytes(data)
     verdict = fuzz_scenes.judge(case, build=False)
     status = cli.main(["check", str(path)])
