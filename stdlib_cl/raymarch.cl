@@ -257,8 +257,8 @@ vec3 refracted(vec3 dir, vec3 normal, real eta) {
 }
 
 // Transparency (seed 000, seed 004): the ray refracts into the solid,
-// marches inside it (where the distance estimate is negative) to its far
-// side, refracts out, and what it sees there is mixed in by `transparency`.
+// marches inside it to its far side, refracts out, and what it sees there is
+// mixed in by `transparency`.
 vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 seen,
                        scalar pixel_angle, __constant scalar *params) {
     vec3 p = v3_add(origin, v3_scale(dir, m.t));
@@ -268,16 +268,33 @@ vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 
         return seen;
     real threshold = hit_threshold(m.t, pixel_angle);
     vec3 inside_dir = refracted(dir, normal, 1.0f / s.ior);
-    vec3 start = v3_sub(p, v3_scale(normal, 2.0f * threshold));
-    real t = 0.0f;
+    // Inside is where the distance is below the hit threshold, as at the hit
+    // `p` itself. A signed distance is marched by the depth -d; the inside of
+    // an escape-time fractal has no depth (its estimate is about 0 there),
+    // so steps are at least `shortest`: the scene's bounding diameter fits
+    // in MAX_STEPS of them. Gaps narrower than a step are passed over.
+    real shortest = threshold;
+#if FEATURE_SCENE_BOUND
+    vec3 centre;
+    shortest = max(shortest, 2.0f * scene_bound(params, &centre) / (real)MAX_STEPS);
+#endif
+    real t = 0.0f, t_inside = 0.0f;
     mask marching = active;
     for (int i = 0; i < MAX_STEPS && ANY(marching); i++) {
-        real depth = -distance_estimate(v3_add(start, v3_scale(inside_dir, t)), params);
-        marching = marching & (depth >= threshold);
-        t = SELECT(t, t + max(depth, threshold), marching);
+        real d = distance_estimate(v3_add(p, v3_scale(inside_dir, t)), params);
+        marching = marching & (d < threshold);
+        t_inside = SELECT(t_inside, t, marching);
+        t = SELECT(t, t + max(-d, shortest), marching);
         marching = marching & (t < (real)MAX_DISTANCE);
     }
-    vec3 exit = v3_add(start, v3_scale(inside_dir, t));
+    // the far side lies between the last point inside and the first one out
+    for (int i = 0; i < 8; i++) {
+        real middle = 0.5f * (t_inside + t);
+        mask within = distance_estimate(v3_add(p, v3_scale(inside_dir, middle)), params) < threshold;
+        t_inside = SELECT(t_inside, middle, within);
+        t = SELECT(middle, t, within);
+    }
+    vec3 exit = v3_add(p, v3_scale(inside_dir, t));
     vec3 exit_normal = estimate_normal(exit, threshold, params);
     vec3 out_dir = refracted(inside_dir, v3_scale(exit_normal, -1.0f), s.ior);
     vec3 out_start = v3_add(exit, v3_scale(exit_normal, 2.0f * threshold));

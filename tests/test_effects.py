@@ -657,6 +657,41 @@ def test_hard_shadows_pass_through_transparent_solids():
         assert np.allclose(seen, dark + transparency * (bright - dark), atol=1e-4), transparency
 
 
+@pytest.mark.parametrize("fractal", ["mandelbulb(power: 8, iterations: 12, bailout: 2)", "julia(iterations: 12)"])
+def test_glass_fractals_show_what_lies_behind_them_smoothly(fractal):
+    """An escape-time fractal's estimate is about 0 inside, not a depth: a
+    ray through it is marched with steps of at least a fraction of the
+    scene's bound. Through a glass fractal (transparency 0.8) the red wall
+    behind shows on most of it, the image is smoother than the opaque
+    fractal's, and other seeds (other dithered hits) change it no more
+    than they change the opaque one. (Marched by the depth, the ray came
+    out where it went in: noise of the fractal's own shade.)"""
+    def renders(transparency):
+        scene = fractalc.loads(f"""
+            material glass {{ color: (0.9, 0.95, 1.0), specular: 0.5, transparency: {transparency}, ior: 1.3 }}
+            material wall {{ color: (1, 0.2, 0.2), specular: 0 }}
+            scene {fractal}.material(glass) | box((6, 0.2, 6)).translate((0, 2.5, 0)).material(wall)
+            camera {{ position: (0, -3.2, 1.0), target: (0, 0, 0), fov: 40 }}
+            light directional {{ direction: (-0.5, 0.4, -1) }}
+        """)
+        return [scene.render(width=W, height=H, seed=seed) for seed in (0, 1)]
+    opaque, glass = renders(0), renders(0.8)
+    solid = np.isfinite(opaque[0].depth) & (opaque[0].depth < 4.5)      # the fractal, not the wall
+    pairs = solid[:, 1:] & solid[:, :-1]
+    assert solid.sum() > 1000
+
+    def roughness(image):
+        return np.abs(np.diff(image.rgba[..., :3], axis=1))[pairs].mean()
+
+    def seed_change(images):
+        return np.abs(images[0].rgba[..., :3] - images[1].rgba[..., :3])[solid].mean()
+    colour = glass[0].rgba[..., :3]
+    assert not np.isnan(colour).any()
+    assert (colour[..., 0] > 2 * colour[..., 1])[solid].mean() > 0.9
+    assert roughness(glass[0]) < 0.5 * roughness(opaque[0])
+    assert seed_change(glass) < seed_change(opaque)
+
+
 @pytest.mark.parametrize("direction", [(0, 0, -1), (0.8, 0, -1), (2, 0, -1), (1, 1.5, -1)])
 def test_a_glass_slab_is_counted_once_whatever_the_light_angle(direction):
     """A slab of transparency 0.8 (3 x 3 x 0.2, at height 2) under oblique
