@@ -3,21 +3,26 @@ and optionally an MP4 of them.
 
 Frames already on disk are kept, so a run that stopped resumes where it
 stopped; each frame file appears atomically (`Image.save`), so a frame on
-disk is a whole frame.
+disk is a whole frame. Each frame also carries, in its metadata, a digest
+of the scene text and settings it was rendered with: a frame on disk is
+kept only if its digest is this run's, so a run with other text or
+settings renders stale frames again instead of mixing them in.
 """
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import json
 import os
 import sys
-import tempfile
-from dataclasses import replace
 
 import numpy as np
 
+from . import __version__
 from .api import Scene
 from .errors import RenderError
 from .paths import camera_at, frame_times, params_at
-from .write import linear_to_srgb, publish
+from .write import linear_to_srgb, replacing
 
 
 def frame_file(pattern: str, index: int) -> str:
@@ -26,18 +31,53 @@ def frame_file(pattern: str, index: int) -> str:
     return pattern % index
 
 
+SETTINGS_KEY = "path.settings_sha256"      # frame metadata: the digest of _frame_settings
+
+
+def _frame_settings(scene: Scene, fps: float, seed: int, render_keys: dict) -> str:
+    """The digest of all that makes a frame what it is besides its index:
+    the scene text, params, every render setting (size, samples,
+    precision, ...), fps, seed and the fractalc version."""
+    settings = {
+        "fractalc": __version__,
+        "scene_sha256": hashlib.sha256(scene.checked.source.encode()).hexdigest(),
+        "params": scene.params,
+        "render": dataclasses.asdict(scene._settings(render_keys)),
+        "fps": fps,
+        "seed": seed,
+    }
+    return hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()
+
+
+def _stamp(file: str) -> str | None:
+    """The settings digest a frame file carries; None if there is no
+    readable frame there."""
+    import OpenImageIO as oiio
+    if not os.path.isfile(file):
+        return None
+    image = oiio.ImageInput.open(file)
+    if image is None:
+        oiio.geterror()          # not a frame: render it, and let the error go
+        return None
+    stamp = image.spec().getattribute(f"fractalc:{SETTINGS_KEY}")
+    image.close()
+    return stamp
+
+
 def render_frames(scene: Scene, pattern: str, fps: float, seed: int = 0, overwrite: bool = False,
                   progress: bool = False, **render_keys) -> tuple[list[str], int]:
-    """Render every frame of the scene's path that is not on disk yet (all
-    of them with `overwrite`). Returns the frame files, in order, and how
-    many were rendered now. The scene's params are restored afterwards."""
+    """Render every frame of the scene's path that is not on disk yet from
+    the same scene text and settings (all of them with `overwrite`).
+    Returns the frame files, in order, and how many were rendered now. The
+    scene's params are restored afterwards."""
     from tqdm import tqdm
     path = scene.checked.path
     if path is None:
         raise ValueError(f"{scene.checked.file} has no 'path' to animate")
     times = frame_times(path, fps)
     files = [frame_file(pattern, i) for i in range(len(times))]
-    missing = [i for i, f in enumerate(files) if overwrite or not os.path.exists(f)]
+    settings = _frame_settings(scene, fps, seed, render_keys)
+    missing = [i for i, f in enumerate(files) if overwrite or _stamp(f) != settings]
     os.makedirs(os.path.dirname(os.path.abspath(files[0])), exist_ok=True)
     original = dict(scene.params)
     bar = tqdm(total=len(files), initial=len(files) - len(missing), unit="frame", leave=False,
@@ -47,8 +87,9 @@ def render_frames(scene: Scene, pattern: str, fps: float, seed: int = 0, overwri
             time = float(times[index])
             scene.set_params(params_at(path, time))
             image = scene.render(seed=seed, camera=camera_at(path, scene.checked.camera, time), **render_keys)
-            metadata = {**image.metadata, "path.frame": str(index), "path.time": f"{time:g}"}
-            replace(image, metadata=metadata).save(files[index])
+            metadata = {**image.metadata, "path.frame": str(index), "path.time": f"{time:g}",
+                        SETTINGS_KEY: settings}
+            dataclasses.replace(image, metadata=metadata).save(files[index])
             bar.update(1)
     finally:
         bar.close()
@@ -83,10 +124,7 @@ def write_mp4(files: list[str], path: str, fps: float) -> None:
     `path`, atomically."""
     require_mp4_writer()
     import imageio.v2 as imageio
-    directory = os.path.dirname(os.path.abspath(path))
-    handle, temporary = tempfile.mkstemp(prefix=".fractalc-", suffix=".mp4", dir=directory)
-    os.close(handle)
-    try:
+    with replacing(path) as temporary:
         # yuv420p halves the chroma resolution: sizes must be even
         writer = imageio.get_writer(temporary, format="FFMPEG", mode="I", fps=fps, codec="libx264",
                                     pixelformat="yuv420p", macro_block_size=2, quality=8)
@@ -95,7 +133,3 @@ def write_mp4(files: list[str], path: str, fps: float) -> None:
                 writer.append_data(_display_pixels(file))
         finally:
             writer.close()
-        publish(temporary, path)
-    finally:
-        if os.path.exists(temporary):
-            os.unlink(temporary)

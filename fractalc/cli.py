@@ -1,18 +1,22 @@
 """The `fractalc` command line (LANGUAGE.md, "Command line").
 
 Exit codes: 0 success; 2 a scene or usage error (`FILE:LINE:COL: error:`
-with the source line and a caret); 1 a runtime failure, in one line;
-130 interrupted. Never a traceback for any of these.
+with the source line and a caret); 1 a runtime failure, in one line
+(an output that cannot be written included); 130 interrupted; 128 + the signal's
+number for SIGTERM (143) and SIGHUP (129). Never a traceback for any of these.
 """
 from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 import time
+from contextlib import contextmanager
 
 from .errors import RenderError, SceneError
-from .write import publish
+from .write import output_problem, replacing
 
 IMAGE_EXTENSIONS = (".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff")
 
@@ -48,21 +52,25 @@ def _load(args):
 
 
 def _write_text_atomically(path: str, text: str) -> None:
-    import tempfile
-    directory = os.path.dirname(os.path.abspath(path))
-    handle, temporary = tempfile.mkstemp(prefix=".fractalc-", suffix=os.path.splitext(path)[1], dir=directory)
-    try:
-        with os.fdopen(handle, "w") as f:
-            f.write(text)
-        publish(temporary, path)
-    finally:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
+    with replacing(path) as temporary, open(temporary, "w") as f:
+        f.write(text)
+
+
+def _require_writable(*options, folders_made: bool = False) -> None:
+    """Outputs that cannot be written fail before any build or render,
+    as runtime failures (the file system's state, as when a disk fills
+    while writing): (option, as given, file to write) triples
+    (`folders_made`: missing folders will be made)."""
+    for name, given, path in options:
+        problem = path and output_problem(path, folders_made)
+        if problem:
+            raise RenderError(f"{name} {given}: {problem}")
 
 
 def command_render(args) -> int:
     if not args.output.lower().endswith(IMAGE_EXTENSIONS):
         raise UsageError(f"-o {args.output}: the output must end in one of {', '.join(IMAGE_EXTENSIONS)}")
+    _require_writable(("-o", args.output, args.output))
     scene = _load(args)
     overrides = {"width": args.width, "height": args.height, "samples": args.samples}
     try:
@@ -79,6 +87,7 @@ def command_render(args) -> int:
 
 
 def command_compile(args) -> int:
+    _require_writable(("-o", args.output, args.output))
     scene = _load(args)
     _write_text_atomically(args.output, scene.kernel_source())
     return 0
@@ -128,6 +137,8 @@ def command_bench(args) -> int:
                         ("--height", height)):
         if value is not None and value < 1:
             raise UsageError(f"{name} must be at least 1")
+    _require_writable(*((name, path, path) for name, path in
+                        (("--json", args.json), ("--csv", args.csv), ("--plot", args.plot))))
     if not args.sweep:
         for name, value in (("--csv", args.csv), ("--plot", args.plot), ("--vary", args.vary)):
             if value:
@@ -203,6 +214,8 @@ def command_animate(args) -> int:
     if not args.fps > 0:
         raise UsageError("--fps must be greater than 0")
     _require_positive(("--width", args.width), ("--height", args.height), ("--samples", args.samples))
+    _require_writable(("-o", args.output, first), folders_made=True)
+    _require_writable(("--mp4", args.mp4, args.mp4))
     from .animate import render_frames, require_mp4_writer, write_mp4
     if args.mp4:
         require_mp4_writer()
@@ -361,6 +374,42 @@ def _apply_environment_options(args) -> None:
         os.environ[VERBOSE_ENVIRONMENT] = "1"
 
 
+class Terminated(BaseException):
+    """SIGTERM or SIGHUP, raised wherever the program is, so that it
+    unwinds through every cleanup (temporary files) as Ctrl-C does."""
+
+    def __init__(self, number: int):
+        super().__init__(number)
+        self.number = number
+
+
+_TERMINATING_SIGNALS = [getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n)]
+
+
+def _raise_terminated(number, frame):
+    for other in _TERMINATING_SIGNALS:     # a second signal must not cut the cleanup short
+        signal.signal(other, signal.SIG_IGN)
+    raise Terminated(number)
+
+
+@contextmanager
+def _terminating_signals_raise():
+    """While the command runs, SIGTERM and SIGHUP raise Terminated (a
+    signal the caller ignores, as under nohup, stays ignored)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {n: signal.getsignal(n) for n in _TERMINATING_SIGNALS}
+    for number, handler in previous.items():
+        if handler == signal.SIG_DFL:
+            signal.signal(number, _raise_terminated)
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
@@ -370,7 +419,8 @@ def main(argv: list[str] | None = None) -> int:
         os.environ["PYOPENCL_NO_CACHE"] = "1"
     try:
         _apply_environment_options(args)
-        return args.run(args)
+        with _terminating_signals_raise():
+            return args.run(args)
     except SceneError as error:
         print(error, file=sys.stderr)
         return 2
@@ -388,6 +438,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("fractalc: interrupted", file=sys.stderr)
         return 130
+    except Terminated as stop:
+        print(f"fractalc: stopped by {signal.Signals(stop.number).name}", file=sys.stderr)
+        return 128 + stop.number
 
 
 SUPERVISED_ENVIRONMENT = "FRACTALC_SUPERVISED"

@@ -3,7 +3,8 @@
 The image is rendered in tiles, each launched while the ones before it still
 run (the device never waits for the host): no single launch covers a large
 frame (GPU watchdogs), and progress is reported per tile. The kernel writes
-every pixel in place into one image-sized buffer, read back once.
+every pixel in place into one image-sized buffer, read back once; that
+buffer is the image returned (no copy), which writers take as it is.
 """
 from __future__ import annotations
 
@@ -122,7 +123,20 @@ def render(program, device: Device, frame: Frame, params, lanes: int, double: bo
         mapped, _ = cl.enqueue_map_buffer(device.queue, out, cl.map_flags.READ, 0, image.shape,
                                           image.dtype, is_blocking=True)
         mapped.base.release(device.queue)
-    return image[:height, :width]
+    return _without_padding(image, height, width)
+
+
+def _without_padding(image: np.ndarray, height: int, width: int) -> np.ndarray:
+    """The top-left height x width pixels of `image` as one contiguous
+    array in the same memory (a writer takes it as it is): rows are moved
+    down in place over the padding of the pitch, never copied whole."""
+    rows, pitch, channels = image.shape
+    if pitch == width:
+        return image[:height]
+    flat, row = image.reshape(-1), width * channels
+    for y in range(1, height):    # row y lands before row y + 1 starts: nothing is overwritten unread
+        flat[y * row:(y + 1) * row] = image[y, :width].reshape(-1)
+    return flat[:height * row].reshape(height, width, channels)
 
 
 def _finish(tile, progress: Callable[[int], None] | None) -> None:

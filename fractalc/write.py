@@ -1,19 +1,30 @@
 """Stage 7: arrays -> image file (`write`).
 
-EXR: float, linear, channels R G B A Z N.x N.y N.z steps, with metadata.
-Anything else (PNG, ...): sRGB 8-bit RGBA. The file appears atomically: it is
-written beside its destination under a temporary name, then renamed.
+EXR: float, linear, channels R G B A Z N.x N.y N.z steps. Anything else
+(PNG, ...): sRGB 8-bit RGBA. Both carry the metadata (`fractalc:` names)
+where the format has room for it (EXR header, PNG text).
+
+The file appears atomically: it is written beside its destination under a
+temporary name, then renamed; the temporary file is removed whatever stops the write (an error, Ctrl-C, or
+the CLI's SIGTERM and SIGHUP handlers). Memory: an EXR is written from the
+render's own array (its channels are already interleaved in EXR order),
+and a PNG is converted in strips of rows into its 8-bit pixels, so that a
+write needs at most a ninth of the float image beyond the render's array.
 """
 from __future__ import annotations
 
 import os
-import tempfile
+import secrets
+import stat
+from contextlib import contextmanager
 
 import numpy as np
 
 from .errors import RenderError
 
 EXR_CHANNELS = ("R", "G", "B", "A", "Z", "N.x", "N.y", "N.z", "steps")
+TEMPORARY_PREFIX = ".fractalc-"
+STRIP_ROWS = 64
 
 
 def linear_to_srgb(linear: np.ndarray) -> np.ndarray:
@@ -21,51 +32,135 @@ def linear_to_srgb(linear: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
 
 
-def _pixels(planes: dict[str, np.ndarray], exr: bool) -> np.ndarray:
-    if exr:
-        return np.stack([planes[c] for c in EXR_CHANNELS], axis=-1).astype(np.float32)
-    rgb = linear_to_srgb(np.stack([planes[c] for c in "RGB"], axis=-1))
-    rgba = np.concatenate([rgb, np.clip(planes["A"], 0, 1)[..., None]], axis=-1)
-    return np.round(rgba * 255.0).astype(np.uint8)
+def _interleaved(planes: dict[str, np.ndarray]) -> np.ndarray:
+    """The planes as one (H, W, 9) float32 array in EXR channel order. A
+    render's planes are views of such an array, the kernel's own: then it
+    is that array, not a copy."""
+    def address(array):
+        return array.__array_interface__["data"][0]
+
+    first = planes[EXR_CHANNELS[0]]
+    itemsize = first.itemsize
+    # plane i starts i values after plane 0, with the same strides: the
+    # view below covers exactly the planes' own memory
+    if all(p.dtype == np.float32 and p.shape == first.shape and p.strides == first.strides
+           and address(p) == address(first) + i * itemsize
+           for i, p in enumerate(planes[c] for c in EXR_CHANNELS)):
+        pixels = np.lib.stride_tricks.as_strided(first, (*first.shape, len(EXR_CHANNELS)),
+                                                 (*first.strides, itemsize), writeable=False)
+        if pixels.flags.c_contiguous:
+            return pixels
+    return np.stack([planes[c] for c in EXR_CHANNELS], axis=-1).astype(np.float32, copy=False)
+
+
+def _srgb_rgba8(planes: dict[str, np.ndarray]) -> np.ndarray:
+    """sRGB 8-bit RGBA, converted in strips of rows: the float temporaries
+    of the conversion stay a strip's size."""
+    height, width = planes["A"].shape
+    rgba8 = np.empty((height, width, 4), dtype=np.uint8)
+    for top in range(0, height, STRIP_ROWS):
+        rows = slice(top, top + STRIP_ROWS)
+        rgb = linear_to_srgb(np.stack([planes[c][rows] for c in "RGB"], axis=-1))
+        rgba = np.concatenate([rgb, np.clip(planes["A"][rows], 0, 1)[..., None]], axis=-1)
+        rgba8[rows] = np.round(rgba * 255.0)
+    return rgba8
+
+
+class WriteError(RenderError):
+    """A file could not be written; `cause` is the system's reason."""
+
+    def __init__(self, path: str, cause: str):
+        super().__init__(f"cannot write {path}: {cause}")
+        self.cause = cause
+
+
+@contextmanager
+def replacing(path: str, publish_when_done: bool = True):
+    """A new temporary file beside `path`, for the block to write; when the
+    block ends normally it is published onto `path`, and in every case it is
+    gone afterwards. OS failures name `path`, never the temporary file."""
+    directory = os.path.dirname(os.path.abspath(path))
+    # Named before it exists, so that an exception at any point after the
+    # file is made (a signal) finds the name to remove; 64 random bits make
+    # it no one else's file.
+    temporary = os.path.join(directory, f"{TEMPORARY_PREFIX}{secrets.token_hex(8)}{os.path.splitext(path)[1]}")
+    try:
+        os.close(os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+        yield temporary
+        if publish_when_done:
+            publish(temporary, path)
+    except OSError as error:
+        raise WriteError(path, error.strerror or str(error)) from None
+    finally:
+        try:
+            os.unlink(temporary)
+        except FileNotFoundError:
+            pass
 
 
 def publish(temporary: str, path: str) -> None:
-    """Give a finished temporary file the permissions a new file gets
-    (mkstemp makes it private) and move it into place atomically."""
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(temporary, 0o666 & ~umask)
+    """Move a finished temporary file onto `path` atomically. A file it
+    replaces keeps its permissions; a new one gets those of any new file
+    (the umask's), not mkstemp's private ones."""
+    try:
+        mode = stat.S_IMODE(os.stat(path).st_mode)
+    except FileNotFoundError:
+        umask = os.umask(0)
+        os.umask(umask)
+        mode = 0o666 & ~umask
+    os.chmod(temporary, mode)
     os.replace(temporary, path)
+
+
+def output_problem(path: str, folders_made: bool = False) -> str | None:
+    """Why a file cannot be written at `path`, or None if it can: for
+    checking an output before minutes of rendering, not after. With
+    `folders_made`, missing folders are fine (they will be made) if the
+    nearest one that exists can take them."""
+    if os.path.isdir(path):
+        return f"'{path}' is a folder"
+    folder = os.path.dirname(path) or "."
+    if folders_made:
+        while not os.path.lexists(folder):
+            folder = os.path.dirname(folder) or "."
+    if not os.path.exists(folder):
+        return f"the folder '{folder}' does not exist"
+    if not os.path.isdir(folder):
+        return f"'{folder}' is not a folder"
+    try:
+        with replacing(os.path.join(folder, "probe"), publish_when_done=False):
+            pass
+    except WriteError as error:
+        return f"cannot write in '{folder}': {error.cause}"
+    return None
 
 
 def write(path: str, planes: dict[str, np.ndarray], metadata: dict[str, str]) -> None:
     """Write the render's planes to `path` (format from its extension)."""
     import OpenImageIO as oiio
     exr = path.lower().endswith(".exr")
-    pixels = _pixels(planes, exr)
-    height, width, channels = pixels.shape
-    spec = oiio.ImageSpec(width, height, channels, oiio.FLOAT if exr else oiio.UINT8)
+    height, width = planes["Z"].shape
+    spec = oiio.ImageSpec(width, height, len(EXR_CHANNELS) if exr else 4, oiio.FLOAT if exr else oiio.UINT8)
     spec.channelnames = EXR_CHANNELS if exr else ("R", "G", "B", "A")
     spec.alpha_channel = 3
     if exr:
         spec.z_channel = 4
         spec.attribute("compression", "zip")
-        for key, value in metadata.items():
-            spec.attribute(f"fractalc:{key}", str(value))
+    else:
+        # the colour is stored as it is (alpha is 1 where fractalc renders):
+        # else OpenImageIO divides it by alpha, in float copies of the image
+        spec.attribute("oiio:UnassociatedAlpha", 1)
+    for key, value in metadata.items():
+        spec.attribute(f"fractalc:{key}", str(value))
     spec.attribute("Software", f"fractalc {metadata.get('version', '')}".strip())
-    directory = os.path.dirname(os.path.abspath(path))
-    suffix = os.path.splitext(path)[1]
-    handle, temporary = tempfile.mkstemp(prefix=".fractalc-", suffix=suffix, dir=directory)
-    os.close(handle)
-    try:
+    pixels = _interleaved(planes) if exr else _srgb_rgba8(planes)
+    with replacing(path) as temporary:
         output = oiio.ImageOutput.create(temporary)
         if output is None or not output.open(temporary, spec):
             raise RenderError(f"cannot write {path}: {oiio.geterror() or 'unsupported format'}")
-        ok = output.write_image(pixels)
-        output.close()
-        if not ok:
+        try:
+            written = output.write_image(pixels)
+        finally:
+            closed = output.close()
+        if not (written and closed):
             raise RenderError(f"cannot write {path}: {output.geterror()}")
-        publish(temporary, path)
-    finally:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
