@@ -101,16 +101,27 @@ def test_the_output_is_checked_before_the_scene(work):
     assert "nodir/out.png" in result.stderr and "broken.frac:" not in result.stderr
 
 
+def can_create_in(folder):
+    import tempfile
+    try:
+        tempfile.TemporaryFile(dir=folder).close()
+        return True
+    except OSError:
+        return False
+
+
 def test_an_unwritable_folder_is_reported_by_its_name(work):
     locked = work / "locked"
     locked.chmod(0o555)
     try:
-        if os.access(locked, os.W_OK):
-            pytest.skip("this user (root) may write in any folder")
-        result = fractalc_cli("render", "cheap.frac", "-o", "locked/out.png", cwd=work)
+        # root may write in a locked folder, but not in /sys
+        folder = next((str(f) for f in (locked, Path("/sys")) if f.is_dir() and not can_create_in(f)), None)
+        if folder is None:
+            pytest.skip("no folder here that this user cannot write in")
+        result = fractalc_cli("render", "cheap.frac", "-o", f"{folder}/out.png", cwd=work)
         assert result.returncode == 1
-        assert result.stderr.strip() == ("fractalc: error: -o locked/out.png: cannot write in 'locked': "
-                                         "Permission denied")
+        assert result.stderr.startswith(f"fractalc: error: -o {folder}/out.png: cannot write in '{folder}': ")
+        assert len(result.stderr.strip().splitlines()) == 1
         assert list(locked.iterdir()) == []
     finally:
         locked.chmod(0o755)
@@ -118,9 +129,10 @@ def test_an_unwritable_folder_is_reported_by_its_name(work):
 
 def test_output_problem_on_the_file_system(tmp_path):
     (tmp_path / "file").write_text("x")
+    deep = str(tmp_path / "a" / "b" / "out.png")
     assert output_problem(str(tmp_path / "out.png")) is None
-    assert output_problem(str(tmp_path / "a" / "b" / "out.png")) == f"the folder '{tmp_path / 'a' / 'b'}' does not exist"
-    assert output_problem(str(tmp_path / "a" / "b" / "out.png"), folders_made=True) is None
+    assert output_problem(deep) == f"the folder '{tmp_path / 'a' / 'b'}' does not exist"
+    assert output_problem(deep, folders_made=True) is None
     assert output_problem(str(tmp_path / "file" / "b" / "out.png"), folders_made=True) == \
         f"'{tmp_path / 'file'}' is not a folder"
     assert output_problem(str(tmp_path)) == f"'{tmp_path}' is a folder"
@@ -137,6 +149,10 @@ def wait_for(condition, process, timeout=120):
         time.sleep(0.005)
 
 
+POSIX_ONLY = pytest.mark.skipif(sys.platform == "win32", reason="SIGTERM and SIGHUP are POSIX signals")
+
+
+@POSIX_ONLY
 def test_sigterm_while_writing_leaves_no_temporary_file(work):
     (work / "out.exr").write_bytes(b"the previous image")
     process = subprocess.Popen(command("render", "cheap.frac", "-o", "out.exr", "--width", 1920, "--height", 1080,
@@ -151,6 +167,7 @@ def test_sigterm_while_writing_leaves_no_temporary_file(work):
     assert (work / "out.exr").read_bytes() == b"the previous image"
 
 
+@POSIX_ONLY
 def test_sighup_while_rendering_frames_leaves_whole_frames_only(work):
     process = subprocess.Popen(command("animate", "fly.frac", "-o", "frames/f_%02d.png", "--fps", 4,
                                        "--width", 640, "--height", 480, "--samples", 8, "-q"),
@@ -226,6 +243,7 @@ print(before, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
 """
 
 
+@pytest.mark.skipif(sys.platform == "win32", reason="peak RSS from the resource module")
 @pytest.mark.parametrize("name", ["out.png", "out.exr"])
 def test_a_renders_memory_is_the_image_plus_a_little(tmp_path, name):
     """Peak RSS beyond a tiny render's stays under 1.5 times the image's
