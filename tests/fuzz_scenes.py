@@ -779,8 +779,15 @@ def time_limit(seconds: float):
 
 
 def text_of(source: str | bytes) -> str:
-    """What fractalc reads: a file's bytes are decoded with replacement."""
-    return source.decode("utf-8", errors="replace") if isinstance(source, bytes) else source
+    """What fractalc quotes: a file's bytes as UTF-8 (bad bytes escaped), less a byte order mark."""
+    if isinstance(source, str):
+        return source
+    return source.removeprefix(b"\xef\xbb\xbf").decode("utf-8", errors="backslashreplace")
+
+
+# Line breaks: "\r\n", "\r" or "\n" (as editors count lines); other separators
+# such as "\x0c" or "\u2028" are characters of a line.
+LINE_BREAK = re.compile(r"\r\n?|\n")
 
 
 def load(source: str | bytes):
@@ -806,13 +813,13 @@ def _working_folder(folder):
 
 def location_problem(error, text: str, where: tuple | None) -> str:
     """Why the SceneError's places are wrong, or ''."""
-    lines = text.split("\n")
+    lines = LINE_BREAK.split(text)
     for d in error.errors:
         if d.file != FILE:
             return f"error names the file {d.file!r}"
         if not (1 <= d.line <= len(lines)) or not (1 <= d.column <= len(lines[d.line - 1]) + 1):
             return f"error at {d.line}:{d.column}, outside the text"
-        if d.source_line.rstrip("\r\n") != lines[d.line - 1].rstrip("\r"):
+        if d.source_line != lines[d.line - 1]:
             return f"error at line {d.line} quotes another line: {d.source_line!r}"
         if not d.message.strip():
             return "error without a message"
