@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 from . import ast, ir
 from .errors import Diagnostic, SceneError, Span, diagnostic
 from .program import (DEFAULT_MATERIAL, Camera, CameraPath, CheckedScene, Coloring, Combination, Fog, Glow,
-                      Keyframe, Light, Material, ParamCheck, ParamInfo, Primitive, RenderSettings, Slice,
+                      Keyframe, Light, Material, ParamCheck, ParamInfo, Primitive, RenderSettings, Shape, Slice,
                       Transformed, WithMaterial)
 from .stdlib import COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
 
@@ -31,6 +31,16 @@ class Value:
 
 
 _ERROR = Value("error", None)
+
+# Primitives a scene may have, counting a let each time it is used: generated
+# scenes have tens of thousands; a kernel of this many builds in minutes.
+MAX_SHAPES = 20_000
+# The largest float: a number beyond it is infinite in a float kernel
+FLOAT_MAX = 3.4028234663852886e38
+
+
+def in_float_range(x: float) -> bool:
+    return math.isfinite(x) and abs(x) <= FLOAT_MAX
 
 _TYPE_WORDS = {NUM: "a number", SHAPE: "a shape", MATERIAL: "a material", WORD: "a name",
                COLORING: "a colouring (orbit_trap)", "color": "a colour (r, g, b) or orbit_trap(...)",
@@ -50,11 +60,11 @@ class _Checker:
         self.params: dict[str, ParamInfo] = {}
         self.lets: dict[str, ast.LetDecl] = {}
         self.let_values: dict[str, Value] = {}
-        self.evaluating: list[str] = []
         self.material_decls: dict[str, ast.MaterialDecl] = {}
         self.materials: dict[str, Material] = {}
         self.colors: dict[tuple, str] = {}
         self.param_checks: list[ParamCheck] = []
+        self.shape_sizes: dict[int, tuple[Shape, int]] = {}
 
     # ---- diagnostics -------------------------------------------------------
 
@@ -147,22 +157,62 @@ class _Checker:
         return value.data.value
 
     def let_value(self, name: str) -> Value:
-        if name in self.let_values:
-            return self.let_values[name]
-        decl = self.lets[name]
-        if name in self.evaluating:
-            cycle = " -> ".join(self.evaluating[self.evaluating.index(name):] + [name])
-            self.error(decl.name_span, f"'{name}' is defined in terms of itself ({cycle})")
-            self.let_values[name] = _ERROR
-            return _ERROR
-        self.evaluating.append(name)
-        try:
-            value = self.value_of(decl.value)
-        except _Failed:
-            value = _ERROR
-        self.evaluating.pop()
-        self.let_values.setdefault(name, value)
+        if name not in self.let_values:
+            for ready in self.let_order(name):
+                value = self.let_expression(ready)
+                self.let_values.setdefault(ready, value)   # a let in a cycle stays an error
         return self.let_values[name]
+
+    def let_expression(self, name: str) -> Value:
+        try:
+            return self.value_of(self.lets[name].value)
+        except _Failed:
+            return _ERROR
+
+    def let_order(self, name: str) -> list[str]:
+        """`name` and the lets without a value that it uses, each after the
+        lets it uses. Depth-first on an explicit stack: a chain of lets of
+        any length costs no Python recursion. A let met again on its own
+        chain is a cycle: reported, and its value is an error."""
+        order: list[str] = []
+        path, stack, placed = [name], [iter(self.let_uses(name))], set()
+        on_path = {name}
+        while stack:
+            used = next(stack[-1], None)
+            if used is None:
+                order.append(path.pop())
+                on_path.discard(order[-1])
+                placed.add(order[-1])
+                stack.pop()
+            elif used in on_path:
+                cycle = " -> ".join(path[path.index(used):] + [used])
+                self.error(self.lets[used].name_span, f"'{used}' is defined in terms of itself ({cycle})")
+                self.let_values[used] = _ERROR
+            elif used not in self.let_values and used not in placed:
+                path.append(used)
+                on_path.add(used)
+                stack.append(iter(self.let_uses(used)))
+        return order
+
+    def let_uses(self, name: str) -> list[str]:
+        """The lets named in a let's expression, in the order evaluation
+        meets them."""
+        found, stack = [], [self.lets[name].value]
+        while stack:
+            e = stack.pop()
+            if isinstance(e, ast.Name):
+                if e.name in self.lets and e.name not in self.params:
+                    found.append(e.name)
+            elif isinstance(e, ast.Vector):
+                stack.extend(reversed(e.items))
+            elif isinstance(e, ast.Unary):
+                stack.append(e.operand)
+            elif isinstance(e, ast.Binary):
+                stack.extend((e.right, e.left))
+            elif isinstance(e, (ast.Call, ast.Method)):
+                receiver = (e.receiver,) if isinstance(e, ast.Method) else ()
+                stack.extend(reversed(receiver + tuple(a.value for a in e.args)))
+        return found
 
     # ---- expressions -------------------------------------------------------
 
@@ -174,6 +224,9 @@ class _Checker:
 
     def _evaluate(self, e: ast.Expr) -> Value:
         if isinstance(e, ast.Number):
+            if not in_float_range(e.value):
+                self.fail(e.span, f"{_source_text(self.program, e.span)} is too large a number "
+                                  f"(the kernel's floats reach {FLOAT_MAX:.3g})")
             return Value(NUM, ir.const(e.value))
         if isinstance(e, ast.Name):
             return self.name(e)
@@ -236,7 +289,7 @@ class _Checker:
             if e.op == "*" or e.op == "/" or e.op == "+":
                 self.fail(e.span, f"'{e.op}' does not combine shapes: use '|' (union), '&' (intersect) or '-' (subtract)")
             kind = {"|": "union", "&": "intersect", "-": "subtract"}[e.op]
-            return Value(SHAPE, Combination(kind, (left.data, right.data), ir.const(0.0), e.span))
+            return self.shape(Combination(kind, (left.data, right.data), ir.const(0.0), e.span))
         if SHAPE in (left.type, right.type):
             other = right if left.type == SHAPE else left
             self.fail(e.span, f"'{e.op}' needs two shapes or two numbers/vectors, not a shape and {_TYPE_WORDS[other.type]}")
@@ -258,6 +311,9 @@ class _Checker:
             items = tuple(ir.op(op, *args) for args in zip(*lanes))
         except (ValueError, ZeroDivisionError, OverflowError):
             self.fail(e.span, f"'{op}' is undefined for these values")
+        for item in items:
+            if ir.is_const(item) and not in_float_range(item.value):
+                self.fail(e.span, f"'{op}' gives {item.value:.3g}, beyond the kernel's floats ({FLOAT_MAX:.3g})")
         if size == 0:
             return Value(NUM, items[0])
         return Value(vec_type(size), ir.Vec(items))
@@ -396,7 +452,7 @@ class _Checker:
             close = difflib.get_close_matches(name, known, n=1)
             hint = f" (did you mean '{close[0]}'?)" if close else ""
             self.fail(e.name_span, f"unknown function '{name}'{hint}")
-        return Value(SHAPE, Primitive(signature, self.bound_args(e, signature, e.args), e.span))
+        return self.shape(Primitive(signature, self.bound_args(e, signature, e.args), e.span))
 
     def combinator(self, e: ast.Call) -> Value:
         signature = COMBINATORS[e.name]
@@ -414,7 +470,7 @@ class _Checker:
         if e.name == "subtract" and len(values) != 2:
             self.fail(e.span, f"'subtract' takes exactly 2 shapes (a with b cut away), not {len(values)}")
         (smooth,) = self.bound_args(e, signature, options)
-        return Value(SHAPE, Combination(e.name, tuple(v.data for v in values), smooth, e.span))
+        return self.shape(Combination(e.name, tuple(v.data for v in values), smooth, e.span))
 
     def math(self, e: ast.Call) -> Value:
         arity, mode = MATH[e.name]
@@ -452,14 +508,27 @@ class _Checker:
             self.fail(e.name_span, f"'.{e.name}' transforms a shape, this is {_TYPE_WORDS[receiver.type]}")
         args = self.bound_args(e, signature, e.args)
         if e.name == "material":
-            return Value(SHAPE, WithMaterial(receiver.data, args[0], e.span))
+            return self.shape(WithMaterial(receiver.data, args[0], e.span))
         if e.name == "color" and isinstance(args[0], Coloring):
             coloring = args[0]
-            return Value(SHAPE, WithMaterial(receiver.data, self.color_material(coloring.near), e.span,
+            return self.shape(WithMaterial(receiver.data, self.color_material(coloring.near), e.span,
                                              coloring))
         if e.name == "color":
-            return Value(SHAPE, WithMaterial(receiver.data, self.color_material(args[0]), e.span))
-        return Value(SHAPE, Transformed(e.name, receiver.data, args, e.span))
+            return self.shape(WithMaterial(receiver.data, self.color_material(args[0]), e.span))
+        return self.shape(Transformed(e.name, receiver.data, args, e.span))
+
+    def shape(self, shape: Shape) -> Value:
+        """A shape value, counted: the kernel evaluates every primitive of
+        the shape with each let expanded where it is used, so a let used
+        twice in each of a chain of lets doubles it each time."""
+        parts = shape.shapes if isinstance(shape, Combination) else \
+            () if isinstance(shape, Primitive) else (shape.shape,)
+        size = sum(self.shape_sizes[id(p)][1] for p in parts) if parts else 1
+        if size > MAX_SHAPES:
+            self.fail(shape.span, f"this shape is made of {size} primitives once its lets are expanded, "
+                                  f"more than the {MAX_SHAPES} a scene may have")
+        self.shape_sizes[id(shape)] = (shape, size)   # the shape kept alive: ids stay unique
+        return Value(SHAPE, shape)
 
     def color_material(self, rgb: ir.Vec) -> str:
         """`.color(rgb)`: a material with the default's finish in that colour."""
@@ -581,7 +650,9 @@ class _Checker:
             keys.setdefault(name, _P(name, "num", None, *in_range))
         keyframes = []
         for before, frame in zip((None,) + decl.keyframes, decl.keyframes):
-            if before is not None and frame.time <= before.time:
+            if not in_float_range(frame.time):
+                self.error(frame.time_span, f"{_source_text(self.program, frame.time_span)} is too large a time")
+            elif before is not None and frame.time <= before.time:
                 self.error(frame.time_span, f"keyframe times must increase: {frame.time:g} does not come after "
                                             f"{before.time:g} (line {before.span.line})")
             found = self.entries(frame.block, keys, "path")
@@ -597,6 +668,14 @@ class _Checker:
         if len(decl.keyframes) < 2:
             self.error(decl.span, f"a path needs at least two keyframes, this one has {len(decl.keyframes)}")
         return CameraPath(tuple(keyframes), decl.span)
+
+
+def _source_text(program: ast.Program, span: Span) -> str:
+    """The text of a one-line span (a number as the user wrote it)."""
+    lines = program.source.splitlines()
+    if span.line != span.end_line or not 0 < span.line <= len(lines):
+        return "this"
+    return lines[span.line - 1][span.column - 1:span.end_column - 1]
 
 
 def _default(p: Parameter):
@@ -709,6 +788,8 @@ def check_value(param: Parameter, key: str, value):
                          f"not {value!r}") from None
     if is_vector and len(items) != 3:
         raise ValueError(f"'{key}' must have 3 components, not {len(items)}")
+    if not all(in_float_range(x) for x in items):
+        raise ValueError(f"'{key}' must be a finite number within ±{FLOAT_MAX:.3g}, not {value!r}")
     data = ir.Vec(tuple(ir.const(x) for x in items)) if is_vector else ir.const(items[0])
     numeric = param if not choices else _P(param.name, "num", None, *param.constraints)
     try:

@@ -13,7 +13,7 @@ from dataclasses import dataclass, fields
 
 from . import ir
 from .program import (DEFAULT_MATERIAL, CheckedScene, Coloring, Combination, Material, Primitive,
-                      Shape, Transformed, WithMaterial)
+                      Shape, Transformed, WithMaterial, fold_shape)
 from .stdlib import TRAP_KINDS, library
 
 POINT = ir.Var("p", ir.VEC3)
@@ -96,6 +96,46 @@ def _repeated(point: Point, period: ir.Vec) -> Point:
     return tuple(axis(p, c) for p, c in zip(point, period.items))
 
 
+def _plain(s: Combination) -> bool:
+    """A union or intersection without smoothing: min or max of its parts,
+    which may be grouped in any order."""
+    return s.kind != "subtract" and ir.is_const(s.smooth) and s.smooth.value == 0.0
+
+
+def _operands(s: Combination) -> tuple[Shape, ...]:
+    """A combination's parts, with plain parts of the same kind inside a
+    plain one opened up (a union of unions is one union), in order."""
+    if not _plain(s):
+        return s.shapes
+    found, stack = [], list(reversed(s.shapes))
+    while stack:
+        part = stack.pop()
+        if isinstance(part, Combination) and part.kind == s.kind and _plain(part):
+            stack.extend(reversed(part.shapes))
+        else:
+            found.append(part)
+    return tuple(found)
+
+
+def _pairwise(items: list, pair) -> object:
+    """Reduce `items` with `pair` as a balanced tree of neighbours (depth
+    log2 n, not n), each pair in its original order."""
+    while len(items) > 1:
+        items = [pair(*items[i:i + 2]) if i + 1 < len(items) else items[i] for i in range(0, len(items), 2)]
+    return items[0]
+
+
+def _nearer(a, b):
+    """Union of (distance, surface) pairs: on a tie the first part's surface."""
+    (da, sa), (db, sb) = a, b
+    return ir.op("min", da, db), _chosen(ir.op("lt", db, da), sb, sa)
+
+
+def _farther(a, b):
+    (da, sa), (db, sb) = a, b
+    return ir.op("max", da, db), _chosen(ir.op("lt", da, db), sb, sa)
+
+
 class _Lowerer:
     def __init__(self, scene: CheckedScene):
         self.materials = scene.materials
@@ -104,13 +144,27 @@ class _Lowerer:
     def shape(self, s: Shape, point: Point, look: tuple[Surface, Coloring | None]):
         """(distance, surface) of shape `s` at `point`; `look` is the
         innermost enclosing material (and orbit-trap colouring)."""
+        return fold_shape(s, (point, look), self.parts, self.combine)
+
+    def parts(self, s: Shape, context) -> tuple:
+        point, look = context
+        if isinstance(s, Primitive):
+            return ()
+        if isinstance(s, WithMaterial):
+            return ((s.shape, (point, (Surface.of(self.materials[s.material]), s.coloring))),)
+        if isinstance(s, Combination):
+            return tuple((part, context) for part in _operands(s))
+        return ((s.shape, (self.moved(s, point), look)),)
+
+    def combine(self, s: Shape, context, values: list):
+        point, look = context
         if isinstance(s, Primitive):
             return self.primitive(s, point), self.primitive_surface(s, point, look)
         if isinstance(s, WithMaterial):
-            return self.shape(s.shape, point, (Surface.of(self.materials[s.material]), s.coloring))
+            return values[0]
         if isinstance(s, Combination):
-            return self.combination(s, point, look)
-        return self.transformed(s, point, look)
+            return self.combination(s, values)
+        return self.transformed(s, point, *values[0])
 
     def primitive(self, s: Primitive, point: Point) -> ir.Expr:
         distance = ir.call(s.signature.function, (ir.Vec(point),) + s.args)
@@ -136,8 +190,11 @@ class _Lowerer:
         items = surface.items()
         return Surface(*rgb, *items[3:])
 
-    def combination(self, s: Combination, point: Point, look):
-        lowered = [self.shape(child, point, look) for child in s.shapes]
+    @staticmethod
+    def combination(s: Combination, lowered: list):
+        if _plain(s):   # min / max: a balanced tree, the same result as folding left
+            return _pairwise(lowered, _nearer if s.kind == "union" else _farther)
+        # smooth ones fold left to right (LANGUAGE.md)
         distance, surface = lowered[0]
         for d, other in lowered[1:]:
             if s.kind == "union":
@@ -150,24 +207,33 @@ class _Lowerer:
                 distance = _smooth_or_plain("max", "smooth_max", distance, ir.neg(d), s.smooth)
         return distance, surface
 
-    def transformed(self, s: Transformed, point: Point, look):
+    @staticmethod
+    def moved(s: Transformed, point: Point) -> Point:
+        """The point at which the transformed shape's field is read."""
         kind, args = s.kind, s.args
         if kind == "translate":
-            return self.shape(s.shape, tuple(ir.sub(p, v) for p, v in zip(point, args[0].items)), look)
+            return tuple(ir.sub(p, v) for p, v in zip(point, args[0].items))
         if kind == "rotate":
-            return self.shape(s.shape, _rotated(point, args[0], args[1]), look)
+            return _rotated(point, args[0], args[1])
         if kind == "repeat":
-            return self.shape(s.shape, _repeated(point, args[0]), look)
+            return _repeated(point, args[0])
         if kind == "scale":
-            factor = args[0]
-            d, surface = self.shape(s.shape, tuple(ir.div(p, factor) for p in point), look)
-            return ir.mul(d, factor), surface
+            return tuple(ir.div(p, args[0]) for p in point)
         if kind in ("twist", "bend"):
-            rate = args[0]
-            warped = ir.call(f"{kind}_point", (ir.Vec(point), rate), ir.VEC3)
-            d, surface = self.shape(s.shape, ir.components(warped), look)
-            return ir.div(d, ir.call(f"{kind}_lipschitz", (ir.Vec(point), rate))), surface
-        d, surface = self.shape(s.shape, point, look)
+            return ir.components(ir.call(f"{kind}_point", (ir.Vec(point), args[0]), ir.VEC3))
+        return point
+
+    @staticmethod
+    def transformed(s: Transformed, point: Point, d: ir.Expr, surface: Surface):
+        """The transformed shape's (distance, surface) from its inner
+        shape's at the moved point."""
+        kind, args = s.kind, s.args
+        if kind in ("translate", "rotate", "repeat"):
+            return d, surface
+        if kind == "scale":
+            return ir.mul(d, args[0]), surface
+        if kind in ("twist", "bend"):
+            return ir.div(d, ir.call(f"{kind}_lipschitz", (ir.Vec(point), args[0]))), surface
         if kind == "round":
             return ir.sub(d, args[0]), surface
         if kind == "onion":
@@ -199,27 +265,41 @@ class _Bounds:
         self.library = library()
 
     def of(self, s: Shape) -> Bound | None:
+        return fold_shape(s, None, self._parts, self._combine)
+
+    @staticmethod
+    def _parts(s: Shape, context) -> tuple:
         if isinstance(s, Primitive):
-            if s.signature.name == "plane":
-                normal, offset = s.args
-                length = ir.op("sqrt", _dot(*normal.items))
-                return Bound(None, ((tuple(ir.div(c, length) for c in normal.items), offset),))
-            function = f"{s.signature.name}_bound_radius"
-            if function not in self.library.functions:
-                return None
-            return Bound(((ir.const(0.0),) * 3, ir.call(function, s.args)))
-        if isinstance(s, WithMaterial):
-            return self.of(s.shape)
+            return ()
         if isinstance(s, Combination):
-            return self._combination(s)
-        inner = self.of(s.shape)
+            return tuple((part, context) for part in s.shapes)
+        return ((s.shape, context),)
+
+    def _combine(self, s: Shape, context, bounds: list) -> Bound | None:
+        if isinstance(s, Primitive):
+            return self._primitive(s)
+        if isinstance(s, WithMaterial):
+            return bounds[0]
+        if isinstance(s, Combination):
+            return self._combination(s, bounds)
+        inner = bounds[0]
         if inner is None or s.kind in ("repeat", "twist", "bend"):
             return None
         return Bound(self._moved_sphere(s, inner.sphere),
                      tuple(self._moved_half_space(s, h) for h in inner.half_spaces))
 
-    def _combination(self, s: Combination) -> Bound | None:
-        bounds = [self.of(child) for child in s.shapes]
+    def _primitive(self, s: Primitive) -> Bound | None:
+        if s.signature.name == "plane":
+            normal, offset = s.args
+            length = ir.op("sqrt", _dot(*normal.items))
+            return Bound(None, ((tuple(ir.div(c, length) for c in normal.items), offset),))
+        function = f"{s.signature.name}_bound_radius"
+        if function not in self.library.functions:
+            return None
+        return Bound(((ir.const(0.0),) * 3, ir.call(function, s.args)))
+
+    @staticmethod
+    def _combination(s: Combination, bounds: list) -> Bound | None:
         if s.kind == "subtract":             # only ever smaller than the first shape
             return bounds[0]
         if s.kind == "intersect":            # within each part: the tightest one known
@@ -297,7 +377,10 @@ def lower(scene: CheckedScene) -> SceneIR:
         for p, c in zip(point, cut.normal):
             plane = ir.add(plane, ir.mul(p, ir.const(c / length)))
         distance = ir.op("max", distance, plane)
-    bound = _Bounds().of(scene.shape)
+    try:
+        bound = _Bounds().of(scene.shape)
+    except (ValueError, ZeroDivisionError, OverflowError):
+        bound = None       # a bound past double's range (scales of scales): march unbounded
     if bound is not None and bound.sphere is None:
         bound = None       # half-spaces alone (a ground plane): march as unbounded
     return SceneIR(scene, distance, surface, bound)

@@ -70,6 +70,27 @@ class WithMaterial:
 Shape = Union[Primitive, Combination, Transformed, WithMaterial]
 
 
+def fold_shape(root: Shape, context, parts, combine):
+    """A value computed over a shape tree bottom-up, without recursion (let
+    chains make trees of any depth). `parts(shape, context)` lists the
+    (part, context) pairs a shape is made of; `combine(shape, context,
+    values)` gives its value from its parts' values, in that order."""
+    values: list = []
+    stack = [(root, context, None)]
+    while stack:
+        shape, here, count = stack.pop()
+        if count is None:
+            children = parts(shape, here)
+            stack.append((shape, here, len(children)))
+            stack.extend((child, there, None) for child, there in reversed(children))
+            continue
+        start = len(values) - count
+        made = combine(shape, here, values[start:])
+        del values[start:]
+        values.append(made)
+    return values[0]
+
+
 # ---- the rest of the scene -------------------------------------------------
 
 @dataclass(frozen=True)

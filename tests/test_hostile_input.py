@@ -68,3 +68,92 @@ def test_params_in_every_argument_position_build_and_match_constants(precision):
     image_depth, image, expected = image.depth, image.rgba, expected.rgba
     assert np.isfinite(image_depth).sum() > 5     # the shapes are in view
     np.testing.assert_allclose(image, expected, atol=2e-3)
+
+
+# ---- many shapes, long let chains ------------------------------------------
+
+CENTRES = np.random.default_rng(10).uniform(-2, 2, (300, 3))
+RADIUS = 0.1
+
+
+def _translated_spheres() -> list[str]:
+    return [f"sphere({RADIUS}).translate(({x:.17g}, {y:.17g}, {z:.17g}))" for x, y, z in CENTRES]
+
+
+def _sphere_distances(points) -> np.ndarray:
+    """(len(CENTRES), N) distances of each sphere of CENTRES."""
+    return np.linalg.norm(points[None, :, :] - CENTRES[:, None, :], axis=2) - RADIUS
+
+
+POINTS = np.random.default_rng(11).uniform(-2.5, 2.5, (64, 3))
+
+
+def test_flat_union_past_the_nesting_limit_builds():
+    """Item 2: 300 shapes in one union (once more brackets than clang takes)."""
+    scene = fractalc.loads(f"scene union({', '.join(_translated_spheres())})")
+    np.testing.assert_allclose(scene.distance(POINTS), _sphere_distances(POINTS).min(axis=0), atol=1e-5)
+    assert np.isfinite(scene.render(width=16, height=12).depth).any()
+
+
+def test_smooth_union_of_many_shapes_folds_left_to_right():
+    """Item 2: a smooth union stays ordered (LANGUAGE.md), however long."""
+    k = 0.3
+    scene = fractalc.loads(f"scene union({', '.join(_translated_spheres())}, smooth: {k})")
+    expected = _sphere_distances(POINTS)[0]
+    for d in _sphere_distances(POINTS)[1:]:
+        h = np.maximum(k - np.abs(expected - d), 0) / k
+        expected = np.minimum(expected, d) - h * h * k / 4
+    np.testing.assert_allclose(scene.distance(POINTS), expected, atol=1e-4)
+
+
+def test_let_chain_of_unions_with_colours_builds():
+    """Item 2: a let chain nests shapes through names, past the parser's
+    limit on brackets; each part keeps its own colour."""
+    lines = [f"let s0 = {_translated_spheres()[0]}.color((1, 0, 0))"]
+    for i, shape in enumerate(_translated_spheres()[1:], 1):
+        lines.append(f"let s{i} = union(s{i - 1}, {shape}.color(({i % 2}, 0.5, 0)))")
+    scene = fractalc.loads("\n".join(lines) + f"\nscene s{len(CENTRES) - 1}\n")
+    np.testing.assert_allclose(scene.distance(POINTS), _sphere_distances(POINTS).min(axis=0), atol=1e-5)
+    image = scene.render(width=16, height=12)
+    assert np.isfinite(image.depth).any() and np.isfinite(image.rgba).all()
+
+
+def test_long_chain_of_reverse_references_checks_and_renders():
+    """Item 3: lets that each name the next one (defined later), with a
+    param: no RecursionError in check or lowering."""
+    n = 2000
+    lets = [f"let s{i} = s{i + 1}.translate((p, 0, 0))" for i in range(n)]
+    radii = [f"let r{i} = r{i + 1} + p" for i in range(n)]
+    text = "\n".join(["param p = 0.0005", *lets, *radii, "let r2000 = 0.5", "let s2000 = sphere(r0)",
+                      "scene s0"])
+    scene = fractalc.loads(text)
+    points = np.array([[0.0, 0, 0], [1, 0, 0], [3, 0.5, 0.2]])
+    expected = np.linalg.norm(points - [n * 0.0005, 0, 0], axis=1) - (0.5 + n * 0.0005)
+    np.testing.assert_allclose(scene.distance(points), expected, atol=1e-4)
+
+
+def _check_errors(text: str, tmp_path, capsys) -> str:
+    """Run `fractalc check` on `text`: it must fail with exit 2 and a
+    located error (no traceback); returns what it printed."""
+    from fractalc.cli import main
+    path = tmp_path / "scene.frac"
+    path.write_text(text)
+    assert main(["check", str(path)]) == 2
+    printed = capsys.readouterr().err
+    assert printed.startswith(f"{path}:") and "Traceback" not in printed
+    return printed
+
+
+def test_a_cycle_of_lets_is_a_located_error(tmp_path, capsys):
+    text = "let a = b.translate((1, 0, 0))\nlet b = union(c, sphere(1))\nlet c = a\nscene a\n"
+    printed = _check_errors(text, tmp_path, capsys)
+    assert ":1:5: error: 'a' is defined in terms of itself (a -> b -> c -> a)" in printed
+
+
+def test_lets_that_double_the_scene_each_time_are_a_located_error(tmp_path, capsys):
+    """A let used twice in each of a chain of lets: 2^40 shapes to lower
+    and compile. Refused at the let where the scene grows too large."""
+    lines = ["let s0 = sphere(0.1)"] + [f"let s{i} = union(s{i - 1}, s{i - 1}.translate((0.1, 0, 0)))"
+                                        for i in range(1, 40)]
+    printed = _check_errors("\n".join(lines) + "\nscene s39\n", tmp_path, capsys)
+    assert ":16:11: error: this shape is made of 32768 primitives" in printed
