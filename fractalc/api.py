@@ -23,6 +23,7 @@ from .lanes import CHOICES as LANE_CHOICES
 from .lower import lower
 from .parse import parse
 from .program import Camera, CheckedScene, RenderSettings
+from .source import read_scene_file
 from .write import write
 
 PRECISIONS = ("float", "double")
@@ -213,11 +214,6 @@ def loads(text: str, params: dict | None = None, precision: str | None = None,
 
 def load(path: str | os.PathLike, params: dict | None = None, precision: str | None = None,
          device: str | None = None, lanes: int | None = None) -> Scene:
-    """Read, parse and check a .frac file."""
+    """Read, parse and check a .frac file (see `source.read_scene_file`)."""
     path = os.fspath(path)
-    try:
-        with open(path, "rb") as f:
-            data = f.read(8 * 1024 * 1024 + 1)
-    except OSError as error:
-        raise RenderError(f"cannot read {path}: {error.strerror}") from None
-    return loads(data.decode("utf-8", errors="replace"), params, precision, device, path, lanes)
+    return loads(read_scene_file(path), params, precision, device, path, lanes)

@@ -15,7 +15,7 @@ import threading
 import time
 from contextlib import contextmanager
 
-from .errors import RenderError, SceneError
+from .errors import NoSceneFile, RenderError, SceneError
 from .write import output_problem, replacing
 
 IMAGE_EXTENSIONS = (".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff")
@@ -38,17 +38,21 @@ def _parse_set(values: list[str]) -> dict[str, float]:
     return params
 
 
-def _require_file(path: str) -> None:
-    if not os.path.isfile(path):
-        raise UsageError(f"cannot read {path}: no such file")
+def _require_file(path: str) -> str:
+    """The scene file's text; no file there (or a directory, FIFO, device) is a usage mistake."""
+    from .source import read_scene_file
+    try:
+        return read_scene_file(path)
+    except NoSceneFile as error:
+        raise UsageError(str(error)) from None
 
 
 def _load(args):
-    from .api import load
-    _require_file(args.scene)
+    from .api import loads
+    text = _require_file(args.scene)
     params = _parse_set(getattr(args, "set", None))
-    return load(args.scene, params=params, precision=getattr(args, "precision", None),
-                device=getattr(args, "device", None))
+    return loads(text, params=params, precision=getattr(args, "precision", None),
+                 device=getattr(args, "device", None), path=args.scene)
 
 
 def _write_text_atomically(path: str, text: str) -> None:
@@ -96,13 +100,7 @@ def command_compile(args) -> int:
 def command_check(args) -> int:
     from .check import check
     from .parse import parse
-    _require_file(args.scene)
-    try:
-        with open(args.scene, "rb") as f:
-            text = f.read(8 * 1024 * 1024 + 1).decode("utf-8", errors="replace")
-    except OSError as error:
-        raise RenderError(f"cannot read {args.scene}: {error.strerror}") from None
-    check(parse(text, args.scene))
+    check(parse(_require_file(args.scene), args.scene))
     return 0
 
 

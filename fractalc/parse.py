@@ -2,20 +2,29 @@
 Transformer to `ast` nodes, so that no step recurses on the input's depth."""
 from __future__ import annotations
 
+import re
 from functools import lru_cache
 
-from lark import Lark, Token, Transformer_NonRecursive, v_args
-from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken, VisitError
+from lark import Lark, Token, Transformer_NonRecursive, Tree, v_args
+from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
 
 from . import ast
-from .errors import SceneError, Span, diagnostic
+from .errors import SceneError, Span, diagnostic, source_lines
 from .resources import resource_dir
+from .source import MAX_FILE_BYTES
 
-MAX_FILE_BYTES = 8 * 1024 * 1024
 MAX_NESTING = 256
 
 _OPENING = {"LPAR": "RPAR", "LSQB": "RSQB", "LBRACE": "RBRACE"}
 _CLOSING = set(_OPENING.values())
+# Tokens that go on reading the operand of a unary minus (a postfix
+# expression); any other token, outside brackets, ends it.
+_OPERAND = {"NAME", "NUMBER", "DOT"}
+_OPERAND_END = {"NAME", "NUMBER", "RPAR", "RSQB"}   # a '-' after these is binary
+
+# Lark counts lines by "\n" alone; a lone "\r" is a line break too
+# (errors.LINE_BREAK), so it reaches Lark as "\n", which keeps every column.
+_LONE_CR = re.compile(r"\r(?!\n)")
 
 # Token names as a user would say them, for "expected ..." messages.
 _TOKEN_WORDS = {
@@ -34,27 +43,41 @@ class _NestingError(Exception):
 
 class _BlockNewlines:
     """Post-lexer: keeps newlines only where they separate block entries
-    (directly inside `{ }`), and enforces the nesting limit."""
+    (directly inside `{ }`), and enforces the nesting limit as the tokens
+    arrive, at the token that passes it, before the parser holds them all.
+    A level is an open bracket or a unary minus whose operand is still
+    being read (the two things the LALR stack grows with)."""
 
     always_accept = ("_NL",)
 
     def process(self, stream):
-        open_brackets: list[str] = []
-        previous_newline = True
+        open_brackets: list[tuple[str, int]] = []   # kind, unary minuses open outside it
+        unary = 0        # unary minuses open at the innermost bracket level
+        depth = 0
+        previous = None
         for token in stream:
             kind = token.type
             if kind == "_NL":
-                if open_brackets and open_brackets[-1] == "LBRACE" and not previous_newline:
-                    previous_newline = True
+                if open_brackets and open_brackets[-1][0] == "LBRACE" and previous != "_NL":
+                    previous = kind
                     yield token
                 continue
-            previous_newline = False
-            if kind in _OPENING:
-                open_brackets.append(kind)
-                if len(open_brackets) > MAX_NESTING:
+            if kind in _OPENING or (kind == "MINUS" and previous not in _OPERAND_END):
+                if kind == "MINUS":
+                    unary += 1
+                else:
+                    open_brackets.append((kind, unary))
+                    unary = 0
+                depth += 1
+                if depth > MAX_NESTING:
                     raise _NestingError(token)
             elif kind in _CLOSING and open_brackets:
-                open_brackets.pop()
+                depth -= 1 + unary
+                unary = open_brackets.pop()[1]
+            elif kind not in _OPERAND:
+                depth -= unary
+                unary = 0
+            previous = kind
             yield token
 
 
@@ -63,13 +86,24 @@ def _span(meta_or_token) -> Span:
     return Span(m.line, m.column, m.end_line, m.end_column)
 
 
-def _depth_checked(node, *children):
-    """AST depth limit for operator chains (brackets are limited earlier)."""
-    depth = 1 + max((getattr(c, "_depth", 0) for c in children), default=0)
-    if depth > MAX_NESTING:
-        raise _NestingError(node.span)
-    object.__setattr__(node, "_depth", depth)
-    return node
+_EXPRESSIONS = {"vector", "negate", "binary", "call", "method", "named_arg", "positional_arg"}
+
+
+class _DepthTree(Tree):
+    """Parse tree node that holds the depth of expression nodes below it and
+    stops the parse the moment it passes the limit (operator chains, which
+    the post-lexer does not count), before the rest of the input is read."""
+    __slots__ = ("depth",)
+
+    def __init__(self, data, children, meta=None):
+        super().__init__(data, children, meta)
+        below = max((c.depth for c in children if isinstance(c, _DepthTree)), default=0)
+        self.depth = below + 1 if data in _EXPRESSIONS else below
+        if self.depth > MAX_NESTING:
+            # A binary node is at its operator; others at their first token.
+            where = children[1] if data == "binary" else next(
+                (c for c in children if isinstance(c, Token)), children[0])
+            raise _NestingError(where)
 
 
 @v_args(meta=True)
@@ -85,32 +119,31 @@ class _ToAst(Transformer_NonRecursive):
         return ast.Name(str(c[0]), _span(meta))
 
     def vector(self, meta, c):
-        return _depth_checked(ast.Vector(tuple(c), _span(meta)), *c)
+        return ast.Vector(tuple(c), _span(meta))
 
     def negate(self, meta, c):
-        return _depth_checked(ast.Unary("-", c[1], _span(meta)), c[1])
+        return ast.Unary("-", c[1], _span(meta))
 
     def binary(self, meta, c):
         left, op, right = c
-        return _depth_checked(ast.Binary(str(op), left, right, _span(meta)), left, right)
+        return ast.Binary(str(op), left, right, _span(meta))
 
     def call(self, meta, c):
         args = c[1] or ()
-        return _depth_checked(ast.Call(str(c[0]), _span(c[0]), args, _span(meta)), *args)
+        return ast.Call(str(c[0]), _span(c[0]), args, _span(meta))
 
     def method(self, meta, c):
         receiver, name, args = c[0], c[1], c[2] or ()
-        return _depth_checked(
-            ast.Method(receiver, str(name), _span(name), args, _span(meta)), receiver, *args)
+        return ast.Method(receiver, str(name), _span(name), args, _span(meta))
 
     def args(self, meta, c):
         return tuple(c)
 
     def named_arg(self, meta, c):
-        return _depth_checked(ast.Arg(str(c[0]), c[1], _span(meta)), c[1])
+        return ast.Arg(str(c[0]), c[1], _span(meta))
 
     def positional_arg(self, meta, c):
-        return _depth_checked(ast.Arg(None, c[0], _span(meta)), c[0])
+        return ast.Arg(None, c[0], _span(meta))
 
     # blocks and declarations
     def entry(self, meta, c):
@@ -159,7 +192,7 @@ class _ToAst(Transformer_NonRecursive):
 def _parser() -> Lark:
     grammar = (resource_dir("grammar") / "frac.lark").read_text()
     return Lark(grammar, parser="lalr", lexer="contextual", postlex=_BlockNewlines(),
-                propagate_positions=True, maybe_placeholders=True)
+                propagate_positions=True, maybe_placeholders=True, tree_class=_DepthTree)
 
 
 def _describe(token: Token) -> str:
@@ -200,20 +233,17 @@ def parse(text: str, path: str = "<string>") -> ast.Program:
     if len(text.encode("utf-8", errors="replace")) > MAX_FILE_BYTES:
         fail(Span(1, 1, 1, 2), f"the scene file is larger than {MAX_FILE_BYTES // (1024 * 1024)} MB")
     try:
-        decls = _ToAst().transform(_parser().parse(text))
+        decls = _ToAst().transform(_parser().parse(_LONE_CR.sub("\n", text)))
     except UnexpectedInput as error:
         token = getattr(error, "token", None)
         if token is not None and token.type == "$END":
-            lines = text.splitlines() or [""]
-            span = Span(len(lines), len(lines[-1]) + 1, len(lines), len(lines[-1]) + 2)
+            lines = source_lines(text)
+            last = len(lines) - (len(lines) > 1 and lines[-1] == "")   # the line a final break ends
+            span = Span(last, len(lines[last - 1]) + 1, last, len(lines[last - 1]) + 2)
         else:
             span = Span(error.line, error.column, error.line, error.column + len(str(token or " ")))
         fail(span, _syntax_message(error))
-    except (_NestingError, VisitError) as error:
-        nesting = error if isinstance(error, _NestingError) else error.orig_exc
-        if not isinstance(nesting, _NestingError):
-            raise
-        where = nesting.token
-        span = where if isinstance(where, Span) else _span(where)
-        fail(span, f"nesting deeper than {MAX_NESTING} levels")
+    except _NestingError as error:
+        where = error.token
+        fail(_span(where.meta if isinstance(where, Tree) else where), f"nesting deeper than {MAX_NESTING} levels")
     return ast.Program(decls, path, text)

@@ -1,0 +1,270 @@
+"""Diagnostics that are right on any input, and bounded effort on hostile
+files: line breaks, control characters, encodings, paths that are not
+files, and inputs built to be slow."""
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+
+import pytest
+
+import fractalc
+from fractalc.cli import main
+from fractalc.errors import LINE_BREAK, Span, diagnostic
+
+CAMERA = "camera { position: (0, -4, 1), target: (0, 0, 0) }\n"
+
+
+def rendered(text: str) -> str:
+    with pytest.raises(fractalc.SceneError) as error:
+        fractalc.loads(text)
+    return str(error.value)
+
+
+def located(output: str) -> tuple[int, int, str]:
+    """The first error's line, column and the quoted text its caret marks."""
+    header, quoted, caret = output.split("\n")[:3]
+    line, column = map(int, re.match(r"<string>:(\d+):(\d+): error:", header).groups())
+    start = caret.index("^")
+    return line, column, quoted[start:start + caret.count("^")]
+
+
+# ---- 1. one definition of a line ---------------------------------------------
+
+@pytest.mark.parametrize("brk", ["\n", "\r\n", "\r"], ids=["LF", "CRLF", "CR"])
+def test_line_breaks_number_lines_alike_in_parser_and_quote(brk):
+    text = f"let a = 1{brk}let b = 2{brk}scene sphere(rdius: 1){brk}{CAMERA}"
+    line, column, marked = located(rendered(text))
+    assert (line, column) == (3, 14)
+    assert marked.startswith("rdius")
+
+
+@pytest.mark.parametrize("char", ["\f", "\v", "\x1c", "\x1d", "\x1e", "\x85", "\u2028", "\u2029"],
+                         ids=["FF", "VT", "FS", "GS", "RS", "NEL", "LS", "PS"])
+def test_other_splitlines_breaks_are_not_line_breaks(char):
+    # Only the last line is wrong; what comes before it is one line either
+    # way, so the error is on line 2 and the caret under the mistake.
+    text = f"let a = 1 # x{char}y\nscene sphere(rdius: 1)\n{CAMERA}"
+    line, column, marked = located(rendered(text))
+    assert (line, column) == (2, 14)
+    assert marked.startswith("rdius")
+
+
+@pytest.mark.parametrize("char", ["\v", "\x1c", "\x1d", "\x1e", "\x85", "\u2028", "\u2029"])
+def test_a_stray_separator_is_an_unexpected_character_marked_where_it_is(char):
+    output = rendered(f"scene sphere()\nlet a = 1{char}let b = 2\n{CAMERA}")
+    line, column, marked = located(output)
+    assert (line, column) == (2, 10)
+    assert marked == char.encode("unicode_escape").decode()
+    assert "let b = 2" in output.split("\n")[1]     # the whole line is quoted, on one line
+
+
+def test_a_form_feed_is_white_space_within_its_line():
+    line, column, marked = located(rendered(f"let\fa = sphre(1)\nscene a\n{CAMERA}"))
+    assert (line, column) == (1, 9)
+    assert marked.startswith("sphre")
+
+
+def test_end_of_file_error_points_after_the_last_line_with_any_break():
+    for brk in ("\n", "\r\n", "\r"):
+        line, column, _ = located(rendered(f"{CAMERA}scene sphere({brk}"))
+        assert (line, column) == (2, 14)
+
+
+# ---- 2. control characters are shown escaped ------------------------------------
+
+@pytest.mark.parametrize("controls", ["\x1b[2J", "\x07", "\x1b]0;title\x07", "\x00", "\x7f", "\u202e", "\ud800"])
+def test_control_characters_are_escaped_and_the_caret_lines_up(controls):
+    text = f"let a = 1 # {controls}\nlet b = 2 {controls} sphre(1)\nscene sphere()\n{CAMERA}"
+    output = rendered(text)
+    assert all(c.isprintable() or c == "\n" for c in output), repr(output)
+    line, column, marked = located(output)
+    assert (line, column) == (2, 11)
+    assert marked.startswith("\\x") or marked.startswith("\\u")
+
+
+def test_caret_under_the_mistake_after_escaped_characters():
+    output = rendered(f"scene sphere()\nlet a = 1 # \x1b[2J\x07\nlet\fb = sphre(1)\n{CAMERA}")
+    line, column, marked = located(output)
+    assert (line, column) == (3, 9)
+    assert marked == "sphre"
+    assert "\\x0c" in output
+
+
+def test_wide_characters_before_the_caret_take_two_columns():
+    output = rendered(f"scene sphere()\nlet a = 1 # 日本\nlet b = sphre(1) # 日本\n{CAMERA}")
+    assert located(output)[2] == "sphre"
+    output = rendered(f"scene sphere()\nlet 日本 = 1\n{CAMERA}")
+    quoted, caret = output.split("\n")[1:3]
+    assert caret.index("^") == quoted.index("日")
+
+
+def test_a_control_character_in_the_cli_output_is_escaped(tmp_path):
+    scene = tmp_path / "bad.frac"
+    scene.write_bytes(b"scene sphere()\nlet a = \x1b[2J\x07\n" + CAMERA.encode())
+    result = subprocess.run([sys.executable, "-m", "fractalc", "check", str(scene)],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert f"{scene}:2:9: error: unexpected character '\\x1b'" in result.stderr
+    assert "\x1b" not in result.stderr and "\x07" not in result.stderr
+
+
+def test_a_long_line_is_quoted_as_a_window_around_the_caret():
+    text = "let a = 1" + " " * 100_000 + "+ sphre(1) # " + "x" * 100_000 + "\nscene sphere()\n" + CAMERA
+    output = rendered(text)
+    quoted, caret = output.split("\n")[1:3]
+    assert len(quoted) < 200 and quoted.strip().startswith("...") and quoted.endswith("x...")
+    assert quoted[caret.index("^"):].startswith("sphre")
+
+
+# ---- 3. encodings ------------------------------------------------------------------
+
+def write(tmp_path, data: bytes):
+    path = tmp_path / "scene.frac"
+    path.write_bytes(data)
+    return str(path)
+
+
+def test_a_byte_order_mark_is_ignored(tmp_path):
+    good = f"scene sphere()\n{CAMERA}".encode()
+    scene = fractalc.load(write(tmp_path, b"\xef\xbb\xbf" + good))
+    assert scene.checked.source == good.decode()
+    with pytest.raises(fractalc.SceneError) as error:
+        fractalc.load(write(tmp_path, b"\xef\xbb\xbfscene sphre()\n" + CAMERA.encode()))
+    assert (error.value.line, error.value.column) == (1, 7)
+
+
+@pytest.mark.parametrize("data, line, column, bad", [
+    (b"scene sphere()\r\nlet a = 1 # caf\xe9\n", 2, 16, "\\xe9"),
+    (b"scene sphere()\rlet \xc3\xa9 = \xff\xfe\n", 2, 9, "\\xff"),
+    (b"scene sphere() # \xe2\x82", 1, 18, "\\xe2\\x82"),
+], ids=["latin-1", "after-CR-and-a-good-character", "truncated-at-the-end"])
+def test_invalid_utf8_is_a_located_error(tmp_path, data, line, column, bad):
+    path = write(tmp_path, data)
+    with pytest.raises(fractalc.SceneError) as error:
+        fractalc.load(path)
+    output = str(error.value)
+    assert output.startswith(f"{path}:{line}:{column}: error: invalid UTF-8")
+    assert "\ufffd" not in output and "larger than" not in output
+    quoted, caret = output.split("\n")[1:3]
+    assert quoted[caret.index("^"):caret.index("^") + caret.count("^")] == bad
+
+
+# ---- 4. paths that are not scene files ------------------------------------------
+
+@pytest.fixture
+def fifo(tmp_path):
+    path = tmp_path / "pipe.frac"
+    os.mkfifo(path)
+    return str(path)
+
+
+COMMANDS = [["check"], ["compile", "-o", "{tmp}/out.cl"], ["render", "-o", "{tmp}/out.png"],
+            ["bench"], ["animate", "-o", "{tmp}/frame_%04d.png"], ["view"]]
+
+
+@pytest.mark.parametrize("command", COMMANDS, ids=[c[0] for c in COMMANDS])
+@pytest.mark.parametrize("kind", ["directory", "/dev/null", "/dev/zero"])
+def test_cli_refuses_a_path_that_is_no_file_as_a_usage_error(tmp_path, capsys, command, kind):
+    path = str(tmp_path) if kind == "directory" else kind
+    argv = [command[0], path] + [a.format(tmp=tmp_path) for a in command[1:]]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    reason = "a directory" if kind == "directory" else "a device"
+    assert f"fractalc: error: cannot read {path}: it is {reason}, not a scene file" in err
+    assert "Traceback" not in err
+
+
+@pytest.mark.parametrize("kind", ["directory", "/dev/zero", "missing"])
+def test_load_refuses_a_path_that_is_no_file(tmp_path, kind):
+    path = {"directory": str(tmp_path), "missing": str(tmp_path / "none.frac")}.get(kind, kind)
+    with pytest.raises(fractalc.RenderError, match=f"cannot read {re.escape(path)}: "):
+        fractalc.load(path)
+
+
+def test_a_fifo_is_refused_at_once_not_waited_on(fifo):
+    code = f"import fractalc\ntry: fractalc.load({fifo!r})\nexcept fractalc.RenderError as e: print(e)"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert result.stdout.strip() == f"cannot read {fifo}: it is a FIFO (named pipe), not a scene file"
+    result = subprocess.run([sys.executable, "-m", "fractalc", "check", fifo],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert result.stderr.strip().endswith("it is a FIFO (named pipe), not a scene file")
+
+
+# ---- 5. bounded effort ----------------------------------------------------------
+
+def nesting_column(text: str) -> int:
+    output = rendered(text + "\n" + CAMERA)
+    match = re.match(r"<string>:1:(\d+): error: nesting deeper than 256 levels", output)
+    assert match, output
+    return int(match[1])
+
+
+@pytest.mark.parametrize("opener", ["(", "-", "sin("])
+def test_nesting_error_is_where_the_limit_is_passed(opener):
+    # `sphere(` opens level 1; the 256th opener after it opens level 257.
+    text = "scene sphere(" + opener * 300 + "1" + ")" * (300 * opener.count("(")) + ")"
+    assert nesting_column(text) == len("scene sphere(") + 255 * len(opener) + len(opener)
+
+
+def test_nesting_counts_brackets_and_unary_minus_together():
+    assert fractalc.loads(f"scene sphere(2 + {'-(' * 127}1{')' * 127})\n{CAMERA}")
+    assert nesting_column("scene sphere(" + "-(" * 200 + "1" + ")" * 200 + ")") == len("scene sphere(") + 256
+
+
+def test_an_operator_chain_stops_at_the_operator_that_passes_the_limit():
+    # A call is a level too: the 256th '|' holds 257 levels.
+    column = nesting_column("scene " + " | ".join(["sphere()"] * 1000))
+    assert column == len("scene ") + 256 * len("sphere() | ") - 1
+
+
+def test_a_minus_after_an_operand_is_binary_not_nesting():
+    assert fractalc.loads(f"let a = {' - '.join(['1'] * 200)}\nscene sphere(a + 500)\n{CAMERA}")
+
+
+HOSTILE = {
+    "minus signs": "'scene ' + '-' * N + '1'",
+    "open brackets": "'scene ' + '(' * N + '1'",
+    "operator chain": "'scene ' + '1|' * (N // 2) + '1'",
+    "bad lines": "'let = \\n' * (N // 7)",
+}
+
+
+def test_hostile_megabytes_answer_fast_in_little_memory():
+    """Each 1 MB input, in a fresh process: its time and peak memory."""
+    code = f"""
+import json, resource, time, fractalc
+N = 1_000_000
+out = {{}}
+for name, text in {{{', '.join(f'{k!r}: {v}' for k, v in HOSTILE.items())}}}.items():
+    start = time.perf_counter()
+    try:
+        fractalc.loads(text)
+    except fractalc.SceneError as error:
+        out[name] = [time.perf_counter() - start, error.line, error.message]
+out['peak_mib'] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+print(json.dumps(out))
+"""
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    measured = json.loads(result.stdout)
+    for name in HOSTILE:
+        seconds, line, message = measured[name]
+        assert seconds < 5, (name, seconds)         # was minutes and GBs for the first two
+    assert measured["peak_mib"] < 400
+    assert measured["minus signs"][2] == measured["open brackets"][2] == "nesting deeper than 256 levels"
+
+
+def test_many_errors_on_a_long_source_cost_linear_time():
+    lines = 20_000
+    source = "let = 1\n" * lines
+    start = time.perf_counter()
+    shown = [str(diagnostic("f", source, Span(i, 5, i, 6), "bad")) for i in range(1, lines + 1)]
+    assert time.perf_counter() - start < 3      # quadratic (a split per error) took ~10 s
+    assert shown[-1] == f"f:{lines}:5: error: bad\n    let = 1\n        ^"
+
+
+def test_line_break_definition_is_the_documented_one():
+    assert LINE_BREAK.split("a\nb\r\nc\rd\fe\u2028f\x85g") == ["a", "b", "c", "d\fe\u2028f\x85g"]
