@@ -16,7 +16,7 @@ import numpy as np
 
 from . import __version__, run
 from .build import build, open_device
-from .check import RENDER_KEYS, check, check_param_values, check_value
+from .check import FLOAT_MAX, RENDER_KEYS, check, check_param_values, check_value, in_float_range
 from .emit import Target, emit
 from .errors import RenderError, SceneError, diagnostic
 from .lanes import CHOICES as LANE_CHOICES
@@ -81,7 +81,12 @@ class Scene:
                 known = ", ".join(declared) or "none"
                 raise SceneError([diagnostic(self.checked.file, self.checked.source, _file_start(),
                                              f"the scene has no param '{name}' (its params: {known})")])
-            value = float(value)
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"param '{name}' must be a number, not {value!r}") from None
+            if not in_float_range(value):   # NaN would pass any range check
+                raise ValueError(f"param '{name}' must be a finite number within ±{FLOAT_MAX:.3g}, not {value!r}")
             if (info.low is not None and value < info.low) or (info.high is not None and value > info.high):
                 raise SceneError([diagnostic(self.checked.file, self.checked.source, info.span,
                                              f"'{name}' = {value:g} is outside its range "
@@ -166,6 +171,8 @@ class Scene:
         """Render with the file's settings, overridden by keyword (any render
         key: width=, height=, samples=, ao=, max_steps=, ...); `camera`
         replaces the file's camera (no rebuild)."""
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2 ** 32:
+            raise ValueError(f"seed must be a whole number from 0 to {2 ** 32 - 1}, not {seed!r}")
         settings = self._settings(render_keys)
         camera = camera or self.checked.camera
         program, target = self._program(settings, camera)
@@ -175,6 +182,8 @@ class Scene:
         try:
             pixels = run.render(program, self.device, frame, self._param_values(), target.lanes,
                                 target.double, bar.update if bar else None)
+        except MemoryError:   # the host's image array: a runtime failure, in one line
+            raise RenderError(f"out of memory for a {settings.width}x{settings.height} image") from None
         finally:
             if bar:
                 bar.close()

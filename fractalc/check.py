@@ -789,7 +789,7 @@ def check_value(param: Parameter, key: str, value):
     if is_vector and len(items) != 3:
         raise ValueError(f"'{key}' must have 3 components, not {len(items)}")
     if not all(in_float_range(x) for x in items):
-        raise ValueError(f"'{key}' must be a finite number within ±{FLOAT_MAX:.3g}, not {value!r}")
+        raise ValueError(f"'{key}' must be finite (within ±{FLOAT_MAX:.3g}), not {value!r}")
     data = ir.Vec(tuple(ir.const(x) for x in items)) if is_vector else ir.const(items[0])
     numeric = param if not choices else _P(param.name, "num", None, *param.constraints)
     try:

@@ -31,11 +31,29 @@ def _parse_set(values: list[str]) -> dict[str, float]:
         name, sep, value = item.partition("=")
         if not sep or not name.strip():
             raise UsageError(f"--set takes NAME=VALUE, not '{item}'")
+        from .check import in_float_range
         try:
-            params[name.strip()] = float(value)
+            number = float(value)
         except ValueError:
             raise UsageError(f"--set {name.strip()}: '{value}' is not a number") from None
+        if not in_float_range(number):
+            raise UsageError(f"--set {name.strip()}: '{value}' is not a finite number within float's range")
+        params[name.strip()] = number
     return params
+
+
+def _seed(text: str) -> int:
+    """--seed: the kernel's jitter seed is a 32-bit unsigned integer."""
+    if not (text.isascii() and text.isdigit()) or int(text) >= 2 ** 32:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number from 0 to {2 ** 32 - 1}")
+    return int(text)
+
+
+def _device(text: str) -> str:
+    """--device: an index in ASCII digits, or a name; '٣' is neither."""
+    if any(c.isdigit() for c in text) and not text.isascii():
+        raise argparse.ArgumentTypeError(f"'{text}': a device index is written in the digits 0-9")
+    return text
 
 
 def _require_file(path: str) -> str:
@@ -248,7 +266,7 @@ def _parser() -> argparse.ArgumentParser:
                        help="set a param (repeatable); no recompilation")
         p.add_argument("--precision", choices=("float", "double"),
                        help="arithmetic of the whole kernel (default: the file's, else float)")
-        p.add_argument("--device", help="OpenCL device: index, name substring, 'cpu' or 'gpu' "
+        p.add_argument("--device", type=_device, help="OpenCL device: index, name substring, 'cpu' or 'gpu' "
                                         "(see 'fractalc devices'; also $FRACTALC_DEVICE)")
         p.add_argument("--lanes", help="rays per work-item: 1, 2, 4, 8 or 16 (default: the widest the "
                                        "device builds and runs, see 'fractalc devices'; also $FRACTALC_LANES)")
@@ -259,7 +277,7 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--width", type=int)
         p.add_argument("--height", type=int)
         p.add_argument("--samples", type=int, help="anti-aliasing samples per pixel")
-        p.add_argument("--seed", type=int, default=0, help="jitter seed for samples > 1")
+        p.add_argument("--seed", type=_seed, default=0, help="jitter seed for samples > 1")
         p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
         device_options(p)
 

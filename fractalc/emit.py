@@ -21,6 +21,11 @@ from .stdlib import library
 
 AMBIENT = 0.25          # ambient light, times the material's colour and AO
 AO_DELTA = 0.05         # spacing of the AO samples along the normal
+# A light's radiance, and a point light's inverse-square factor, are capped so
+# that sums of lights, their reflections and fog stay finite in float (no
+# inf, no inf * 0 = NaN under a shadow) however bright the scene makes them
+MAX_RADIANCE = 1e20
+MAX_INVERSE_SQUARE = 1e8
 
 
 @dataclass(frozen=True)
@@ -260,7 +265,7 @@ def _bound_function(scene_ir: SceneIR, with_half_spaces: bool) -> str:
 
 
 def _light_block(index: int, light: Light, bound, transparent: bool) -> tuple[str, set[str]]:
-    radiance = _vector(tuple(c * light.intensity for c in light.color))
+    radiance = _vector(tuple(min(c * light.intensity, MAX_RADIANCE) for c in light.color))
     lines = [f"    {{   // light {index}: {light.kind}, shadows {light.shadows}"]
     if light.kind == "directional":
         length = sum(c * c for c in light.vector) ** 0.5
@@ -272,7 +277,8 @@ def _light_block(index: int, light: Light, bound, transparent: bool) -> tuple[st
         lines += [f"        vec3 offset = v3_sub({_vector(light.vector)}, p);",
                   "        real reach = v3_length(offset);",
                   "        vec3 to_light = v3_scale(offset, 1.0f / reach);",
-                  f"        vec3 radiance = v3_scale({radiance}, 1.0f / (reach * reach));"]
+                  f"        vec3 radiance = v3_scale({radiance}, "
+                  f"fmin(1.0f / (reach * reach), {literal(MAX_INVERSE_SQUARE)}));"]
     needs = set()
     if bound is not None and light.shadows != "none":
         # past the scene's bounding sphere nothing can block the light, nor

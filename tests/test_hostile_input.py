@@ -157,3 +157,86 @@ def test_lets_that_double_the_scene_each_time_are_a_located_error(tmp_path, caps
                                         for i in range(1, 40)]
     printed = _check_errors("\n".join(lines) + "\nscene s39\n", tmp_path, capsys)
     assert ":16:11: error: this shape is made of 32768 primitives" in printed
+
+
+# ---- numbers that overflow -------------------------------------------------
+
+@pytest.mark.parametrize("text, where", [
+    ("scene sphere(1e400)", ":1:14:"),
+    ("scene sphere(1).rotate((1e308, 0, 0), 30)", ":1:25:"),
+    ("scene sphere(radius: 2e38 * 2)", ":1:22:"),
+    ("scene sphere(1)\nrender { width: 1e400 }", ":2:17:"),
+    ("scene sphere(1)\nmaterial m { color: (1e400, 0, 0) }", ":2:22:"),
+    ("param p = 1e400\nscene sphere(1)", ":1:11:"),
+    ("scene sphere(1)\nlight point { position: (0, 0, 3), intensity: -1e400 }", ":2:48:"),
+])
+def test_numbers_beyond_float_are_located_errors(text, where, tmp_path, capsys):
+    printed = _check_errors(text + "\n", tmp_path, capsys)
+    assert f"{where} error:" in printed and ("too large a number" in printed or "beyond" in printed)
+
+
+def _usage_error(argv, capsys) -> str:
+    """`fractalc ARGV` must stop with exit 2 before rendering."""
+    from fractalc.cli import main
+    try:
+        code = main(argv)
+    except SystemExit as stop:      # argparse's own usage errors
+        code = stop.code
+    assert code == 2
+    return capsys.readouterr().err
+
+
+@pytest.mark.parametrize("option, value", [
+    ("--set", "p=inf"), ("--set", "p=nan"), ("--set", "p=-1e39"), ("--seed", "-1"), ("--seed", "4294967296"),
+    ("--device", "٣"),
+])
+def test_command_line_values_out_of_range_are_usage_errors(option, value, tmp_path, capsys):
+    scene = tmp_path / "scene.frac"
+    scene.write_text("param p = 1\nscene sphere(p)\n")
+    output = tmp_path / "out.png"
+    printed = _usage_error(["render", str(scene), "-o", str(output), "-q", "--width", "16", "--height", "12",
+                            option, value], capsys)
+    assert option in printed and "Traceback" not in printed
+    assert not output.exists()
+
+
+def test_python_values_out_of_range_raise_value_errors_naming_the_key():
+    scene = fractalc.loads("param x = 1\nscene sphere(x)\n")
+    for keys, name in (({"width": float("inf")}, "width"), ({"samples": float("nan")}, "samples"),
+                       ({"background": (float("nan"), 0, 0)}, "background"), ({"seed": -1}, "seed")):
+        with pytest.raises(ValueError, match=name):
+            scene.render(**keys)
+    for value in (float("nan"), float("inf"), -1e39):
+        with pytest.raises(ValueError, match="'x'"):
+            scene.set_params({"x": value})
+    assert scene.params == {"x": 1.0}
+
+
+def test_out_of_memory_is_one_line_with_exit_1(tmp_path, capsys, monkeypatch):
+    """The host's image array not fitting in memory (numpy's MemoryError;
+    simulated: a real one needs a 144 GiB array) is a runtime failure."""
+    from fractalc import cli, run
+
+    def no_memory(*args, **kwargs):
+        raise MemoryError("Unable to allocate 144. GiB for an array")
+
+    monkeypatch.setattr(run, "render", no_memory)
+    scene = tmp_path / "scene.frac"
+    scene.write_text("scene sphere(1)\n")
+    assert cli.main(["render", str(scene), "-o", str(tmp_path / "out.exr"), "-q",
+                     "--width", "65536", "--height", "65536"]) == 1
+    printed = capsys.readouterr().err
+    assert printed.startswith("fractalc: error: out of memory") and printed.count("\n") == 1
+
+
+@pytest.mark.parametrize("precision", ["float", "double"])
+def test_lights_bright_enough_to_overflow_give_finite_pixels(precision):
+    text = "\n".join(["scene union(sphere(1), plane(offset: -1))",
+                      "light point { position: (2, -2, 3), intensity: 1e38, color: (3, 3, 3) }",
+                      "light point { position: (-2, -2, 3), intensity: 3e38 }",
+                      "light directional { direction: (0, 1, -1), intensity: 3e38, color: (1000, 1, 1) }",
+                      "light directional { direction: (1, 1, -1), intensity: 3e38, shadows: soft }",
+                      "camera { position: (0, -5, 2), target: (0, 0, 0) }"])
+    image = fractalc.loads(text, precision=precision).render(width=16, height=12)
+    assert np.isfinite(image.depth).any() and np.isfinite(image.rgba).all()
+    assert image.rgba[..., :3].max() > 1e10       # still as bright as it can be
