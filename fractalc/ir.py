@@ -101,17 +101,49 @@ class Vec(_Node):
 
 
 @node
-class Bounded(_Node):
-    """`inner` where `bound < margin`, else `bound`: a conservative bounding
-    distance that spares evaluating `inner` (a fractal) far from it. Both
-    are lower bounds of the true distance, so either is a safe step."""
-    bound: "Expr"
-    inner: "Expr"
-    margin: "Expr"
+class State(_Node):
+    """Carried value `index` of the loop at nesting `level`, as it is at the
+    start of an iteration: a loop's body is written in its States. A
+    State is named by position, not by loop, so that equal loops are one
+    node (interning) and so are computed once."""
+    level: int
+    index: int
     type: str = REAL
 
 
-Expr = Union[Const, Param, Var, Op, Call, Comp, Bounded]
+@node
+class Loop(_Node):
+    """Up to `count` (uniform) iterations of `next` over the carried values
+    that start as `init`. With a `condition` (a mask of the States), a ray
+    whose condition fails stops iterating and keeps its values; the loop
+    ends when every ray has stopped. Its results are `Out(loop, i)`."""
+    level: int
+    init: tuple["Expr", ...]
+    next: tuple["Expr", ...]
+    condition: "Expr | None"
+    count: "Expr"
+
+
+@node
+class Branch(_Node):
+    """`then` where `condition` holds, else `otherwise` (each a tuple of
+    values; results `Out(branch, i)`). Only the rays that need `then`
+    compute it: a uniform condition is an if/else, a per-ray one computes
+    `otherwise` and then, if any ray needs it, `then`."""
+    condition: "Expr"
+    then: tuple["Expr", ...]
+    otherwise: tuple["Expr", ...]
+
+
+@node
+class Out(_Node):
+    """Result `index` of a Loop or a Branch."""
+    source: "Loop | Branch"
+    index: int
+    type: str = REAL
+
+
+Expr = Union[Const, Param, Var, Op, Call, Comp, State, Out]
 Arg = Union[Expr, Vec]
 
 
@@ -132,7 +164,7 @@ OPS: dict[str, tuple[int, Callable, str]] = {
     "sin": (1, math.sin, REAL), "cos": (1, math.cos, REAL), "tan": (1, math.tan, REAL),
     "asin": (1, math.asin, REAL), "acos": (1, math.acos, REAL), "atan": (1, math.atan, REAL),
     "atan2": (2, math.atan2, REAL),
-    "sqrt": (1, math.sqrt, REAL), "abs": (1, abs, REAL),
+    "sqrt": (1, math.sqrt, REAL), "rsqrt": (1, lambda a: 1.0 / math.sqrt(a), REAL), "abs": (1, abs, REAL),
     "min": (2, min, REAL), "max": (2, max, REAL),
     "pow": (2, math.pow, REAL), "exp": (1, math.exp, REAL), "log": (1, math.log, REAL),
     "floor": (1, math.floor, REAL), "round": (1, _python_round, REAL),
@@ -140,6 +172,11 @@ OPS: dict[str, tuple[int, Callable, str]] = {
     "mix": (3, lambda a, b, t: a + (b - a) * t, REAL),
     "radians": (1, math.radians, REAL), "degrees": (1, math.degrees, REAL),
     "lt": (2, lambda a, b: float(a < b), MASK),
+    "le": (2, lambda a, b: float(a <= b), MASK),
+    "eq": (2, lambda a, b: float(a == b), MASK),
+    "and": (2, lambda a, b: float(bool(a) and bool(b)), MASK),
+    "or": (2, lambda a, b: float(bool(a) or bool(b)), MASK),
+    "not": (1, lambda a: float(not a), MASK),
     "select": (3, lambda c, a, b: a if c else b, REAL),
 }
 
@@ -214,17 +251,67 @@ def vec(*items: Expr) -> Vec:
     return Vec(tuple(items))
 
 
+# ---- loops and branches --------------------------------------------------------
+
+_loop_level = [0]      # nesting of the loop bodies being built
+
+
+def loop(init, count: Expr, step: Callable, condition: Callable | None = None) -> tuple[Expr, ...]:
+    """The results of a loop carrying `init`: `step(states)` gives the next
+    values, `condition(states)` (optional) whether a ray goes on."""
+    level = _loop_level[0]
+    states = tuple(State(level, i, e.type) for i, e in enumerate(init))
+    _loop_level[0] += 1
+    try:
+        next_values = tuple(step(states))
+        test = None if condition is None else condition(states)
+    finally:
+        _loop_level[0] -= 1
+    if test is not None and is_const(test):
+        if not test.value:
+            return tuple(init)
+        test = None
+    made = Loop(level, tuple(init), next_values, test, count)
+    return tuple(Out(made, i, e.type) for i, e in enumerate(init))
+
+
+def branch(condition: Expr, then, otherwise) -> tuple[Expr, ...]:
+    """`then` where `condition` holds, else `otherwise`: tuples of values,
+    or callables giving them (so that a constant condition never builds
+    the side it does not take)."""
+    if is_const(condition):
+        chosen = then if condition.value else otherwise
+        return tuple(chosen() if callable(chosen) else chosen)
+    then = tuple(then() if callable(then) else then)
+    otherwise = tuple(otherwise() if callable(otherwise) else otherwise)
+    if then == otherwise:
+        return then
+    made = Branch(condition, then, otherwise)
+    return tuple(Out(made, i, e.type) for i, e in enumerate(then))
+
+
+def bounded(bound: Expr, inner: Expr, margin: Expr) -> Expr:
+    """`inner` where `bound < margin`, else `bound`: a conservative bounding
+    distance that spares evaluating `inner` (a fractal) far from it. Both
+    are lower bounds of the true distance, so either is a safe step."""
+    return branch(op("lt", bound, margin), (inner,), (bound,))[0]
+
+
 # ---- walking ---------------------------------------------------------------
 
 def children(e) -> tuple:
     if isinstance(e, (Op, Call)):
         return e.args
-    if isinstance(e, Bounded):
-        return (e.bound, e.inner, e.margin)
     if isinstance(e, Comp):
         return (e.vector,)
     if isinstance(e, Vec):
         return e.items
+    if isinstance(e, Out):
+        return (e.source,)
+    if isinstance(e, Loop):
+        return (*e.init, *e.next, *(() if e.condition is None else (e.condition,)), e.count)
+    if isinstance(e, Branch):
+        return (e.condition, *e.then, *e.otherwise)
     return ()
 
 

@@ -14,7 +14,8 @@ from dataclasses import dataclass, fields
 from . import ir
 from .program import (DEFAULT_MATERIAL, CheckedScene, Coloring, Combination, Material, Primitive,
                       Shape, Transformed, WithMaterial, fold_shape)
-from .stdlib import TRAP_KINDS, library
+from .fractals import orbit
+from .stdlib import library
 
 POINT = ir.Var("p", ir.VEC3)
 # Evaluate a fractal within one bound radius of its bounding sphere. Beyond,
@@ -167,24 +168,23 @@ class _Lowerer:
         return self.transformed(s, point, *values[0])
 
     def primitive(self, s: Primitive, point: Point) -> ir.Expr:
-        distance = ir.call(s.signature.function, (ir.Vec(point),) + s.args)
-        bound_radius = f"{s.signature.name}_bound_radius"
-        if s.signature.kind != "fractal" or bound_radius not in self.library.functions:
-            return distance
+        if s.signature.kind != "fractal":
+            return ir.call(s.signature.function, (ir.Vec(point),) + s.args)
+        distance = orbit(s.signature.name, point, s.args).distance
         # A fractal: far from its bounding sphere, the sphere's distance is
         # a safe step and the fractal is not evaluated (Hart et al. 1989).
-        radius = ir.call(bound_radius, s.args)
+        radius = ir.call(f"{s.signature.name}_bound_radius", s.args)
         bound = ir.call("sd_sphere", (ir.Vec(point), radius))
-        return ir.Bounded(bound, distance, ir.mul(radius, ir.const(BOUND_MARGIN)))
+        return ir.bounded(bound, distance, ir.mul(radius, ir.const(BOUND_MARGIN)))
 
     def primitive_surface(self, s: Primitive, point: Point, look) -> Surface:
         surface, coloring = look
-        trap_function = f"{s.signature.name}_orbit_trap"
-        if coloring is None or trap_function not in self.library.functions:
+        if coloring is None or s.signature.kind != "fractal":
             return surface
         # Orbit-trap colour: mix(near, far, clamp(trap * scale, 0, 1)).
-        kind = ir.Const(float(TRAP_KINDS.index(coloring.trap)), ir.INT)
-        trap = ir.call(trap_function, (ir.Vec(point),) + s.args + (kind,))
+        traps = orbit(s.signature.name, point, s.args, trap=True).trap
+        trap = ir.op("min", traps[1], ir.op("min", traps[2], traps[3])) if coloring.trap == "planes" \
+            else traps[("origin", "x", "y", "z").index(coloring.trap)]
         t = ir.op("clamp", ir.mul(trap, coloring.scale), ir.const(0.0), ir.const(1.0))
         rgb = tuple(ir.op("mix", a, b, t) for a, b in zip(coloring.near.items, coloring.far.items))
         items = surface.items()

@@ -176,6 +176,9 @@ def library() -> Library:
         found, sigs = _parse_file(path, file_name)
         functions.update((f.name, f) for f in found)
         signatures.update(sigs)
+    from .fractals import FRACTALS    # the fractals are IR, their signatures beside them
+    for name, (parameters, _) in FRACTALS.items():
+        signatures[name] = Signature("fractal", name, tuple(_parse_parameter(a) for a in _split_top_level(parameters)))
     names = set(functions)
     with_calls = {}
     for f in functions.values():
@@ -219,7 +222,7 @@ COLORINGS = {
         _p("near", "vec3", (1.0, 0.85, 0.55), "0..1000"), _p("far", "vec3", (0.15, 0.25, 0.6), "0..1000"),
         _p("trap", "word:origin|x|y|z|planes", "origin"), _p("scale", "num", 1.0, ">0"))),
 }
-TRAP_KINDS = ("origin", "x", "y", "z", "planes")    # the kind numbers of orbit_trap.cl
+TRAP_KINDS = ("origin", "x", "y", "z", "planes")
 
 # math function -> (arity, how arguments combine): "map" applies per
 # component (numbers broadcast), the others take and give what they say.

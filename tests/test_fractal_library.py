@@ -1,7 +1,8 @@
-"""The fractal distance estimators of `stdlib_cl/fractals/`, built on their
-own (prelude + one file + a small kernel), against the float64 numpy
-reference in `reference_fractals.py`: accuracy, lower bounds for the exact
-solids, finiteness in the hard cases, and the bound radii."""
+"""The fractal distance estimators (the IR loops of `fractalc/fractals.py`,
+emitted on their own, with every argument a kernel param) and their bound
+radii (`stdlib_cl/fractals/`), against the float64 numpy reference in
+`reference_fractals.py`: accuracy, lower bounds for the exact solids,
+finiteness in the hard cases, and the bound radii."""
 
 from functools import lru_cache
 
@@ -9,7 +10,9 @@ import numpy as np
 import pytest
 
 import reference_fractals as ref
-from fractalc.emit import _DOUBLE_LITERAL, _library_text
+from fractalc import ir
+from fractalc.emit import _library_text, double_literals, function_source
+from fractalc.fractals import orbit
 from fractalc.stdlib import library
 
 LANES = (1, 8)
@@ -20,14 +23,13 @@ SLACK = {"float": 1e-5, "double": 1e-12}       # lower bounds may exceed the tru
 
 _KERNELS = """
 __kernel void evaluate(__global const scalar *x, __global const scalar *y, __global const scalar *z,
-                       __constant scalar *nums, __constant int *ints, __global scalar *out) {{
+                       __constant scalar *params, __global scalar *out) {{
     int i = get_global_id(0);
     vec3 p = v3(LOAD_LANES(i, x), LOAD_LANES(i, y), LOAD_LANES(i, z));
-    real d = {function}(p{args});
-    STORE_LANES(d, i, out);
+    STORE_LANES(fractal_distance(p, params), i, out);
 }}
 
-__kernel void bound(__constant scalar *nums, __constant int *ints, __global scalar *out) {{
+__kernel void bound(__constant scalar *params, __global scalar *out) {{
     real r = {name}_bound_radius({bound_args});
     STORE_LANES(r, 0, out);
 }}
@@ -36,29 +38,42 @@ __kernel void bound(__constant scalar *nums, __constant int *ints, __global scal
 
 # ---------------------------------------------------------------- the harness
 
+def _arguments(name):
+    """The fractal's arguments as IR params, one per number (vec4 as four),
+    in the order `_c_arguments` lists their values."""
+    args, index = [], 0
+    for parameter in library().signatures[name].parameters:
+        width = 4 if parameter.type == "vec4" else 1
+        params = [ir.Param(index + k, f"{parameter.name}{k}") for k in range(width)]
+        args.append(ir.Vec(tuple(params)) if width == 4 else params[0])
+        index += width
+    return tuple(args)
+
+
 @lru_cache(maxsize=None)
 def _program(name, lanes, precision):
-    """The built program of the library functions NAME's DE and bound need
-    (stdlib_cl/fractals/NAME.cl and what it calls), with kernels `evaluate`
-    (the DE at points) and `bound` (the bound radius)."""
+    """The built program of NAME's DE (emitted from its IR) and its bound,
+    with kernels `evaluate` (the DE at points) and `bound` (the radius)."""
     import pyopencl as cl
     from fractalc.build import open_device
     lib = library()
-    function = lib.signatures[name].function
-    types = lib.functions[function].parameter_types[1:]          # after `vec3 p`
-    args = [f"ints[{k}]" if t == "int" else f"(real)nums[{k}]" for k, t in enumerate(types)]
-    kernels = _KERNELS.format(function=function, name=name, args="".join(", " + a for a in args),
-                              bound_args=", ".join(args))
+    args = _arguments(name)
+    point = ir.components(ir.Var("p", ir.VEC3))
+    distance = function_source(orbit(name, point, args).distance,
+                               "real fractal_distance(vec3 p, __constant scalar *params)")
+    bound = f"{name}_bound_radius"
+    bound_args = [f"(int)params[{k}]" if t == "int" else f"(real)params[{k}]"
+                  for k, t in enumerate(lib.functions[bound].parameter_types)]
+    kernels = _KERNELS.format(name=name, bound_args=", ".join(bound_args))
     source = "\n".join([f"#define LANES {lanes}", f"#define PRECISION_DOUBLE {int(precision == 'double')}",
-                        lib.prelude, _library_text(lib.closure([function, f"{name}_bound_radius"])),
-                        kernels])
+                        "#define FAST_MATH 0", lib.prelude, _library_text(lib.closure([bound])), distance, kernels])
     if precision == "double":
-        source = _DOUBLE_LITERAL.sub(r"\1", source)
+        source = double_literals(source)
     device = open_device()
     try:
         program = cl.Program(device.context, source).build()
     except cl.RuntimeError as error:   # keep the build log in the failure
-        raise AssertionError(f"{name}.cl does not build ({lanes} lanes, {precision}):\n{error}") from None
+        raise AssertionError(f"{name} does not build ({lanes} lanes, {precision}):\n{error}") from None
     return device, cl.Kernel(program, "evaluate"), cl.Kernel(program, "bound")
 
 
@@ -73,14 +88,10 @@ def _c_arguments(name, kwargs):
     return values
 
 
-def _buffers(device, values, dtype):
-    """Every argument as a number (`nums`) and as an int (`ints`, where it fits);
-    the kernels read each from the array of its C type."""
+def _params(device, values, dtype):
     import pyopencl as cl
     flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
-    ints = [int(round(v)) if abs(v) < 2 ** 31 else 0 for v in values]
-    return (cl.Buffer(device.context, flags, hostbuf=np.asarray(values, dtype=dtype)),
-            cl.Buffer(device.context, flags, hostbuf=np.asarray(ints, np.int32)))
+    return cl.Buffer(device.context, flags, hostbuf=np.asarray(values, dtype=dtype))
 
 
 def evaluate(name, points, lanes=1, precision="float", **kwargs):
@@ -96,8 +107,8 @@ def evaluate(name, points, lanes=1, precision="float", **kwargs):
     xyz = [cl.Buffer(device.context, flags, hostbuf=np.ascontiguousarray(padded[:, i])) for i in range(3)]
     out = np.empty(count, dtype=dtype)
     out_buffer = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY, out.nbytes)
-    nums, ints = _buffers(device, _c_arguments(name, dict(kwargs)), dtype)
-    kernel(device.queue, (count // lanes,), None, *xyz, nums, ints, out_buffer)
+    params = _params(device, _c_arguments(name, dict(kwargs)), dtype)
+    kernel(device.queue, (count // lanes,), None, *xyz, params, out_buffer)
     cl.enqueue_copy(device.queue, out, out_buffer)
     return out[:len(points)].astype(np.float64)
 
@@ -108,8 +119,8 @@ def bound_radius(name, lanes=1, precision="float", **kwargs):
     dtype = np.float64 if precision == "double" else np.float32
     out = np.empty(lanes, dtype=dtype)
     out_buffer = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY, out.nbytes)
-    nums, ints = _buffers(device, _c_arguments(name, dict(kwargs)), dtype)
-    kernel(device.queue, (1,), None, nums, ints, out_buffer)
+    params = _params(device, _c_arguments(name, dict(kwargs)), dtype)
+    kernel(device.queue, (1,), None, params, out_buffer)
     cl.enqueue_copy(device.queue, out, out_buffer)
     return float(out[0])
 

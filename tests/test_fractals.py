@@ -464,41 +464,43 @@ def _function_body(source, signature):
 
 # the margin R * MARGIN, or R itself where MARGIN is 1 (folded)
 _MARGIN = r"(\w+)" if MARGIN == 1 else rf"\((\w+) \* {MARGIN}f?\)"
-BOUND_IF = re.compile(rf"^(\s*)if \(ANY\((\w+) < {_MARGIN}\)\) \{{")
+BOUND_TEST = re.compile(rf"^\((\w+) < {_MARGIN}\)$")
+BOUND_IF = re.compile(r"^(\s*)if \(ANY\((\w+)\)\) \{")
 
 
 def _check_bounded_structure(source, names):
-    """Each fractal's de_ call sits in an `if (ANY(b < R * MARGIN))` block,
-    b = sd_sphere(point, R) and R = <name>_bound_radius(...), assigned before."""
+    """Each fractal's loop sits in an `if (ANY(m))` block, m = (b < R *
+    MARGIN), b = sd_sphere(point, R) and R = <name>_bound_radius(...),
+    assigned before, and the block ends by selecting the fractal's value
+    where m holds."""
     body = _function_body(source, "real distance_estimate(")
     lines = body.splitlines()
     assigned = {}
     for line in lines:
-        m = re.match(r"\s*real (\w+) = (.*);$", line)
+        m = re.match(r"\s*(?:real|mask) (\w+) = (.*);$", line)
         if m:
             assigned[m.group(1)] = m.group(2)
-    found = set()
+    found = []
     for n, line in enumerate(lines):
-        call = re.search(r"\bde_(\w+)\(", line)
-        if not call:
+        if not re.match(r"\s*for \(int ", line):
             continue
-        found.add(call.group(1))
         # the innermost enclosing if: the nearest line above with less indentation
         indent = len(line) - len(line.lstrip())
         header = next(lines[k] for k in range(n - 1, -1, -1)
                       if len(lines[k]) - len(lines[k].lstrip()) < indent)
         m = BOUND_IF.match(header)
-        assert m, f"de_{call.group(1)} is not inside an `if (ANY(... < ...))` block:\n{body}"
-        bound_var, radius_var = m.group(2), m.group(3)
+        assert m, f"a fractal's loop is not inside an `if (ANY(...))` block:\n{body}"
+        near = m.group(2)
+        test = BOUND_TEST.match(assigned[near])
+        assert test, assigned[near]
+        bound_var, radius_var = test.group(1), test.group(2)
         bound_text = assigned[bound_var]
-        while re.fullmatch(r"\w+", bound_text):      # r2 = r1; r1 = sd_sphere(...)
-            bound_text = assigned[bound_text]
-        assert re.fullmatch(rf"sd_sphere\(.*, \(real\){radius_var}\)", bound_text), bound_text
-        assert assigned[radius_var].startswith(f"{call.group(1)}_bound_radius("), assigned[radius_var]
-        # the block ends by selecting the fractal's value where near
-        margin = radius_var if MARGIN == 1 else rf"\({radius_var} \* {MARGIN}f?\)"
-        assert re.search(rf"{bound_var} = SELECT\({bound_var}, \w+, \({bound_var} < {margin}\)\);", body)
-    assert found == set(names), f"fractal calls {found}, expected {names}"
+        assert re.fullmatch(rf"sd_sphere\(.*, (\(real\))?{radius_var}\)", bound_text), bound_text
+        name = re.match(r"(\w+)_bound_radius\(", assigned[radius_var]).group(1)
+        found.append(name)
+        value = next(v for v, text in assigned.items() if text == bound_var)   # the block's result
+        assert re.search(rf"{value} = SELECT\({value}, .*, {near}\);", body), body
+    assert sorted(found) == sorted(names), f"fractal loops {found}, expected {names}"
 
 
 @pytest.mark.parametrize("precision", PRECISIONS)
