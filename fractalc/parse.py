@@ -97,7 +97,10 @@ class _DepthTree(Tree):
 
     def __init__(self, data, children, meta=None):
         super().__init__(data, children, meta)
-        below = max((c.depth for c in children if isinstance(c, _DepthTree)), default=0)
+        # Only expressions and argument lists look at their children: the
+        # helper nodes of `x*` lists grow one child at a time.
+        below = max((c.depth for c in children if isinstance(c, _DepthTree)), default=0) \
+            if data in _EXPRESSIONS or data == "args" else 0
         self.depth = below + 1 if data in _EXPRESSIONS else below
         if self.depth > MAX_NESTING:
             # A binary node is at its operator; others at their first token.

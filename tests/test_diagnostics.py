@@ -13,6 +13,7 @@ import pytest
 import fractalc
 from fractalc.cli import main
 from fractalc.errors import LINE_BREAK, Span, diagnostic
+from fractalc.parse import parse
 
 CAMERA = "camera { position: (0, -4, 1), target: (0, 0, 0) }\n"
 
@@ -268,3 +269,21 @@ def test_many_errors_on_a_long_source_cost_linear_time():
 
 def test_line_break_definition_is_the_documented_one():
     assert LINE_BREAK.split("a\nb\r\nc\rd\fe\u2028f\x85g") == ["a", "b", "c", "d\fe\u2028f\x85g"]
+
+
+def best_parse_seconds(text: str) -> float:
+    times = []
+    for _ in range(2):
+        start = time.perf_counter()
+        parse(text)
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+@pytest.mark.parametrize("item", ["let a{i} = {i}\n", "sphere(), "], ids=["declarations", "arguments"])
+def test_long_lists_parse_in_linear_time(item):
+    def scene(n):
+        items = "".join(item.format(i=i) for i in range(n))
+        return items + "scene sphere()" if item.startswith("let") else f"scene union({items}sphere())"
+    ratio = best_parse_seconds(scene(4000)) / best_parse_seconds(scene(1000))
+    assert ratio < 8, ratio     # 4 when linear; 16 when each item costs the ones before it
