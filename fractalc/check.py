@@ -534,7 +534,7 @@ class _Checker:
         """`.color(rgb)`: a material with the default's finish in that colour."""
         key = rgb.items
         if key not in self.colors:
-            name = f"color{len(self.colors)}"
+            name = f"(color {len(self.colors)})"   # not a name a file can declare
             self.colors[key] = name
             self.materials[name] = replace(self.materials[DEFAULT_MATERIAL], name=name, color=rgb)
         return self.colors[key]

@@ -104,7 +104,9 @@ class Material:
     ior: ir.Expr
 
 
-DEFAULT_MATERIAL = "default"
+# Names the compiler makes (this one, `.color(...)`'s materials) hold
+# characters a name in a scene cannot: no material of the file replaces them.
+DEFAULT_MATERIAL = "(default)"
 
 
 @dataclass(frozen=True)

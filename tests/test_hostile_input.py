@@ -240,3 +240,39 @@ def test_lights_bright_enough_to_overflow_give_finite_pixels(precision):
     image = fractalc.loads(text, precision=precision).render(width=16, height=12)
     assert np.isfinite(image.depth).any() and np.isfinite(image.rgba).all()
     assert image.rgba[..., :3].max() > 1e10       # still as bright as it can be
+
+
+# ---- the user's text in generated source and names -------------------------
+
+def test_a_path_with_a_newline_stays_in_the_kernels_comment(tmp_path):
+    """Item 5: the path is written into the kernel's header comment; a
+    newline in it must not start a line of C (here: one turning the union
+    into an intersection)."""
+    text = "scene union(sphere(1), sphere(1).translate((1.5, 0, 0)))\n"
+    hostile = tmp_path / "a\n#define fmin fmax\n.frac"
+    hostile.write_text(text)
+    plain = fractalc.loads(text)
+    scene = fractalc.load(hostile)
+    source = scene.kernel_source()
+    assert not any(line.startswith("#define fmin") for line in source.splitlines())
+    assert str(hostile).replace("\n", "\\u000a") in source
+    points = np.array([[2.5, 0, 0], [-1.0, 0, 0], [0.75, 0, 0], [0, 3, 0]])
+    np.testing.assert_array_equal(scene.distance(points), plain.distance(points))
+
+
+def test_generated_material_names_cannot_be_declared():
+    """Item 6: `.color(...)` and the default material make materials of
+    their own; a file's materials named like them must not replace them."""
+    text = "\n".join([
+        "material color0 { color: (0, 0, 1) }", "material default { color: (0, 1, 0) }",
+        "scene union(sphere(1).color((1, 0, 0)), sphere(1).translate((0, 0, -2)),",
+        "            sphere(0.5).translate((0, 0, 2)).material(color0), box(0.5).translate((0, 0, 3)).material(default))",
+        "light directional { direction: (0, 1, 0), shadows: none }",
+        "camera { position: (0, -6, 0.5), target: (0, 0, 0.5), fov: 60 }"])
+    scene = fractalc.loads(text)
+    assert {"color0", "default"} <= set(scene.checked.materials) and len(scene.checked.materials) == 4
+    rgba = scene.render(width=16, height=12).rgba
+    column = rgba[:, 8, :3]
+    red, grey = column[6], column[10]            # the coloured sphere, the one below it
+    assert red[0] > 4 * max(red[1], red[2])
+    assert np.allclose(grey, grey[0], rtol=0.01)  # the default material: grey, not the file's green
