@@ -50,6 +50,11 @@ _C_OPS = {
     "/": lambda a, b: f"({a} / {b})",
     "neg": lambda a: f"(-{a})",
     "lt": lambda a, b: f"({a} < {b})",
+    "le": lambda a, b: f"({a} <= {b})",
+    "eq": lambda a, b: f"({a} == {b})",
+    "and": lambda a, b: f"({a} & {b})",
+    "or": lambda a, b: f"({a} | {b})",
+    "not": lambda a: f"(!{a})",
     "select": lambda c, t, f: f"SELECT({f}, {t}, {c})",
     "abs": lambda a: f"fabs({a})",
     "min": lambda a, b: f"fmin({a}, {b})",
@@ -68,14 +73,20 @@ MAX_INLINE_DEPTH = 32
 
 
 class _FunctionWriter:
-    """Writes one C function computing an IR expression of the point: nodes
-    used more than once, library calls and expressions nested deeper than
-    MAX_INLINE_DEPTH get a named temporary, the rest is inlined.
+    """Writes one C function computing IR expressions of the point.
 
-    A node is uniform where it depends on params and constants only: it is
-    computed as a `scalar` (or `int`). Everything else (the point, library
-    calls, which take and return `real`) is per ray; a per-ray node's
-    uniform arguments are widened where C's overloads need one type."""
+    Scheduling: statements come in dependency order; a Loop is a `for`
+    block whose body sees its States as the loop's variables and whose
+    loop-invariant values are computed once before it; a Branch is an `if`
+    block computing its `then` side only for the rays that need it. Values
+    computed inside a block are out of scope after it.
+
+    Rendering: nodes used more than once, library calls and expressions
+    nested deeper than MAX_INLINE_DEPTH get a named temporary, the rest is
+    inlined. A node is uniform where it depends on params and constants
+    only: it is computed as a `scalar` (or `int`). Everything else (the
+    point, library calls, loop and branch results) is per ray; a per-ray
+    node's uniform arguments are widened where C's overloads need one type."""
 
     def __init__(self, root: ir.Expr):
         self.root = root
@@ -85,17 +96,140 @@ class _FunctionWriter:
             for child in ir.children(node):
                 self.uses[child] = self.uses.get(child, 0) + 1
         self.varying = set()
+        self.levels: dict = {}     # the loop levels whose States a node depends on
         for node in self.nodes:
-            if isinstance(node, (ir.Var, ir.Call, ir.Bounded)) \
-                    or any(c in self.varying for c in ir.children(node)):
+            children = ir.children(node)
+            # loops and branches run per ray (their rays stop or choose apart)
+            if isinstance(node, (ir.Var, ir.Call, ir.State, ir.Loop, ir.Branch, ir.Out)) \
+                    or any(c in self.varying for c in children):
                 self.varying.add(node)
+            levels = frozenset().union(*(self.levels[c] for c in children))
+            if isinstance(node, ir.State):
+                levels = frozenset((node.level,))
+            elif isinstance(node, ir.Loop):
+                levels = levels - {node.level}
+            self.levels[node] = levels
         self.text: dict = {}
         self.depth: dict = {}      # how deeply a node's inlined text nests
         self.lines: list[str] = []
         self.counts: dict[str, int] = {}
 
+    # ---- scheduling ------------------------------------------------------------
+
+    @staticmethod
+    def _outside(node) -> tuple:
+        """What must be computed before a node in its own block: for a Loop
+        its start and count (its body runs inside the loop), for a Branch
+        its condition and, for a per-ray condition, its `otherwise`."""
+        if isinstance(node, ir.Loop):
+            return (*node.init, node.count)
+        if isinstance(node, ir.Branch):
+            return (node.condition,)
+        return ir.children(node)
+
+    def block(self, roots, indent: str) -> None:
+        """Emit the statements computing `roots` (a node or a tuple)."""
+        roots = roots if isinstance(roots, tuple) else (roots,)
+        for root in roots:
+            for node in ir.walk(root, self._dependencies):
+                if node in self.text:
+                    continue
+                if isinstance(node, ir.Loop):
+                    self.loop(node, indent)
+                elif isinstance(node, ir.Branch):
+                    self.branch(node, indent)
+                elif isinstance(node, ir.Out):
+                    self.text[node] = self.text[node.source][node.index]
+                    self.depth[node] = 0
+                else:
+                    self.value(node, indent)
+
+    def _dependencies(self, node) -> tuple:
+        if isinstance(node, ir.Branch) and node.condition in self.varying:
+            return (node.condition, *node.otherwise)
+        return self._outside(node)
+
+    def value(self, node, indent: str, hoisted: bool = False) -> None:
+        if isinstance(node, ir.State):
+            raise ValueError(f"{node!r} used outside its loop")
+        text = self.expression(node)
+        self.depth[node] = 1 + max((self.depth.get(c, 0) for c in ir.children(node)), default=0)
+        if (self.named(node) or (hoisted and not self.trivial(node))) and node is not self.root:
+            text = self.declare(self.c_type(node), text, indent)
+            self.depth[node] = 0
+        self.text[node] = text
+
+    def loop(self, node: ir.Loop, indent: str) -> None:
+        body = (*node.next, *(() if node.condition is None else (node.condition,)))
+        # loop-invariant values of the body: once, before the loop
+        for inner in (n for root in body for n in ir.walk(root, self._dependencies)):
+            if node.level not in self.levels[inner] and inner not in self.text \
+                    and not isinstance(inner, (ir.Loop, ir.Branch, ir.Out)):
+                self.block(inner, indent)
+                if not self.trivial(inner) and inner in self.text and self.depth[inner]:
+                    self.text[inner] = self.declare(self.c_type(inner), self.text[inner], indent)
+                    self.depth[inner] = 0
+        names = [self.declare(_C_TYPES[e.type], self.argument(e), indent, "s") for e in node.init]
+        counter = self.fresh("i")
+        count = str(int(node.count.value)) if ir.is_const(node.count) else f"(int){self.text[node.count]}"
+        active = None
+        if node.condition is not None:
+            active = self.declare("mask", "MASK_TRUE", indent, "a")
+        self.lines.append(f"{indent}for (int {counter} = 0; {counter} < {count}; {counter}++) {{")
+        inside, outside = indent + "    ", dict(self.text)
+        for i, e in enumerate(node.init):
+            self.text[ir.State(node.level, i, e.type)] = names[i]
+            self.depth[ir.State(node.level, i, e.type)] = 0
+        if active is not None:
+            self.block(node.condition, inside)
+            self.lines += [f"{inside}{active} = {active} & {self.text[node.condition]};",
+                           f"{inside}if (!ANY({active})) break;"]
+        self.block(node.next, inside)
+        updates = [self.declare(_C_TYPES[e.type], self.argument(e), inside, "n") for e in node.next]
+        for name, update in zip(names, updates):
+            value = update if active is None else f"SELECT({name}, {update}, {active})"
+            self.lines.append(f"{inside}{name} = {value};")
+        self.lines.append(f"{indent}}}")
+        self.text = outside
+        self.text[node] = names
+        self.depth[node] = 0
+
+    def branch(self, node: ir.Branch, indent: str) -> None:
+        inside, outside = indent + "    ", dict(self.text)
+        types = [_C_TYPES[e.type] for e in node.then]
+        condition = self.text[node.condition]
+        if node.condition in self.varying:
+            names = [self.declare(t, self.argument(e), indent, "b") for t, e in zip(types, node.otherwise)]
+            if self.depth[node.condition]:
+                condition = self.declare("mask", condition, indent)
+            self.lines.append(f"{indent}if (ANY({condition})) {{")
+            self.block(node.then, inside)
+            self.lines += [f"{inside}{name} = SELECT({name}, {self.argument(e)}, {condition});"
+                           for name, e in zip(names, node.then)]
+        else:
+            names = [self.fresh("b") for _ in types]
+            self.lines += [f"{indent}{t} {name};" for t, name in zip(types, names)]
+            self.lines.append(f"{indent}if ({condition}) {{")
+            self.block(node.then, inside)
+            self.lines += [f"{inside}{name} = {self.argument(e)};" for name, e in zip(names, node.then)]
+            self.text = dict(outside)
+            self.lines.append(f"{indent}}} else {{")
+            self.block(node.otherwise, inside)
+            self.lines += [f"{inside}{name} = {self.argument(e)};" for name, e in zip(names, node.otherwise)]
+        self.lines.append(f"{indent}}}")
+        self.text = outside
+        self.text[node] = names
+        self.depth[node] = 0
+
+    # ---- rendering -------------------------------------------------------------
+
+    @staticmethod
+    def trivial(node) -> bool:
+        return isinstance(node, (ir.Const, ir.Param, ir.Var, ir.Vec)) or (
+            isinstance(node, ir.Comp) and isinstance(node.vector, ir.Var))
+
     def named(self, node) -> bool:
-        if isinstance(node, (ir.Const, ir.Param, ir.Var, ir.Vec, ir.Bounded)):
+        if isinstance(node, (ir.Const, ir.Param, ir.Var, ir.Vec, ir.State, ir.Out)):
             return False
         if isinstance(node, ir.Comp):
             return not isinstance(node.vector, (ir.Var, ir.Call))
@@ -129,7 +263,7 @@ class _FunctionWriter:
 
     def expression(self, node) -> str:
         if isinstance(node, ir.Const):
-            return f"{int(node.value)}" if node.type == ir.INT else literal(node.value)
+            return f"{int(node.value)}" if node.type in (ir.INT, ir.MASK) else literal(node.value)
         if isinstance(node, ir.Param):
             return f"params[{node.index}]"
         if isinstance(node, ir.Var):
@@ -157,52 +291,31 @@ class _FunctionWriter:
             return _C_OPS[node.op](*args)
         return f"{node.op}({', '.join(value(a) for a in node.args)})"
 
-    def block(self, root, indent: str) -> None:
-        """Emit the statements computing `root`; a `Bounded` node's inner
-        expression goes in its own `if` block, run only when a lane needs it."""
-        outer = lambda n: (n.bound, n.margin) if isinstance(n, ir.Bounded) else ir.children(n)  # noqa: E731
-        for node in ir.walk(root, outer):
-            if node in self.text:
-                continue
-            if isinstance(node, ir.Bounded):
-                self.bounded(node, indent)
-                continue
-            text = self.expression(node)
-            self.depth[node] = 1 + max((self.depth.get(c, 0) for c in ir.children(node)), default=0)
-            if self.named(node) and node is not self.root:
-                text = self.declare(self.c_type(node), text, indent)
-                self.depth[node] = 0
-            self.text[node] = text
-
     def c_type(self, node) -> str:
         if node in self.varying or node.type == ir.VEC3:
             return _C_TYPES[node.type]
         return _UNIFORM_C_TYPES[node.type]
 
-    def declare(self, c_type: str, text: str, indent: str) -> str:
-        prefix = _TEMP_PREFIX[c_type]
+    def fresh(self, prefix: str) -> str:
         name = f"{prefix}{self.counts.get(prefix, 0)}"
         self.counts[prefix] = self.counts.get(prefix, 0) + 1
-        self.lines.append(f"{indent}{c_type} {name} = {text};")
         return name
 
-    def bounded(self, node: ir.Bounded, indent: str) -> None:
-        name = self.declare("real", self.argument(node.bound), indent)
-        near = f"({name} < {self.text[node.margin]})"
-        self.lines.append(f"{indent}if (ANY{near}) {{   // near the bound: evaluate what it bounds")
-        outside = dict(self.text)
-        self.block(node.inner, indent + "    ")
-        self.lines.append(f"{indent}    {name} = SELECT({name}, {self.argument(node.inner)}, {near});")
-        self.lines.append(f"{indent}}}")
-        self.text = outside   # temporaries of the block are out of scope
-        self.text[node] = name
-        self.depth[node] = 0
+    def declare(self, c_type: str, text: str, indent: str, prefix: str | None = None) -> str:
+        name = self.fresh(prefix or _TEMP_PREFIX[c_type])
+        self.lines.append(f"{indent}{c_type} {name} = {text};")
+        return name
 
     def write(self, signature: str) -> str:
         self.block(self.root, "    ")
         body = "\n".join(self.lines)
         result = self.argument(self.root)
         return f"{signature} {{\n{body}{chr(10) if body else ''}    return {result};\n}}"
+
+
+def function_source(root: ir.Expr, signature: str) -> str:
+    """A C function of the point computing `root`."""
+    return _FunctionWriter(root).write(signature)
 
 
 def _calls(root) -> list[str]:
@@ -502,8 +615,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
     """The complete OpenCL program for a lowered scene."""
     lib = library()
     scene = scene_ir.scene
-    distance = _FunctionWriter(scene_ir.distance).write(
-        "real distance_estimate(vec3 p, __constant scalar *params)")
+    distance = function_source(scene_ir.distance, "real distance_estimate(vec3 p, __constant scalar *params)")
     on = features(scene_ir)
     shade, shading_needs = _shade_function(scene_ir, on)
     # the bound serves the march (not with glow) and the shadow rays
