@@ -89,7 +89,7 @@ def quote(line: str, column: int, width: int) -> str:
     return f"    {before}{marked}{after}\n    {' ' * _terminal_columns(before)}{caret}"
 
 
-@lru_cache(maxsize=4)
+@lru_cache(maxsize=2)
 def source_lines(source: str) -> tuple[str, ...]:
     """The lines of `source` (see LINE_BREAK), computed once per source so
     that many diagnostics cost linear time."""

@@ -10,7 +10,7 @@ import codecs
 import os
 import stat
 
-from .errors import LINE_BREAK, Diagnostic, NoSceneFile, RenderError, SceneError
+from .errors import LINE_BREAK, Diagnostic, NoSceneFile, RenderError, SceneError, visible
 
 MAX_FILE_BYTES = 8 * 1024 * 1024
 
@@ -30,18 +30,18 @@ def read_scene_file(path: str) -> str:
     try:
         fd = os.open(path, _OPEN_FLAGS)
     except FileNotFoundError:
-        raise NoSceneFile(f"cannot read {path}: no such file") from None
+        raise NoSceneFile(f"cannot read {visible(path)}: no such file") from None
     except OSError as error:
-        raise RenderError(f"cannot read {path}: {error.strerror}") from None
+        raise RenderError(f"cannot read {visible(path)}: {error.strerror}") from None
     try:
         mode = os.fstat(fd).st_mode
         if not stat.S_ISREG(mode):
             kind = next((word for is_kind, word in _FILE_KINDS if is_kind(mode)), "not a regular file")
-            raise NoSceneFile(f"cannot read {path}: it is {kind}, not a scene file")
+            raise NoSceneFile(f"cannot read {visible(path)}: it is {kind}, not a scene file")
         with os.fdopen(fd, "rb", closefd=False) as f:
             data = f.read(MAX_FILE_BYTES + 1)
     except OSError as error:
-        raise RenderError(f"cannot read {path}: {error.strerror}") from None
+        raise RenderError(f"cannot read {visible(path)}: {error.strerror}") from None
     finally:
         os.close(fd)
     return decode_scene(data, path)
