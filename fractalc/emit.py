@@ -42,24 +42,6 @@ def literal(value: float) -> str:
     return f"{text}f"
 
 
-# IR op -> C text of its (already emitted) arguments
-_C_OPS = {
-    "+": lambda a, b: f"({a} + {b})",
-    "-": lambda a, b: f"({a} - {b})",
-    "*": lambda a, b: f"({a} * {b})",
-    "/": lambda a, b: f"({a} / {b})",
-    "neg": lambda a: f"(-{a})",
-    "lt": lambda a, b: f"({a} < {b})",
-    "le": lambda a, b: f"({a} <= {b})",
-    "eq": lambda a, b: f"({a} == {b})",
-    "and": lambda a, b: f"({a} & {b})",
-    "or": lambda a, b: f"({a} | {b})",
-    "not": lambda a: f"(!{a})",
-    "select": lambda c, t, f: f"SELECT({f}, {t}, {c})",
-    "abs": lambda a: f"fabs({a})",
-    "min": lambda a, b: f"fmin({a}, {b})",
-    "max": lambda a, b: f"fmax({a}, {b})",
-}
 # C types of temporaries: per-ray values, and uniform ones (params and
 # constants only), which stay scalars
 _C_TYPES = {ir.REAL: "real", ir.VEC3: "vec3", ir.INT: "lane_int", ir.MASK: "mask"}
@@ -286,9 +268,10 @@ class _FunctionWriter:
                 return f"SELECT({value(if_false)}, {value(if_true)}, {self.text[condition]})"
             # a uniform condition is a scalar int: C's conditional takes it
             return f"({self.text[condition]} ? {value(if_true)} : {value(if_false)})"
-        if node.op in _C_OPS:
+        render = ir.OPS[node.op].c
+        if render is not None:
             args = [value(a) if node.op in ("min", "max", "abs") else self.text[a] for a in node.args]
-            return _C_OPS[node.op](*args)
+            return render(*args)
         return f"{node.op}({', '.join(value(a) for a in node.args)})"
 
     def c_type(self, node) -> str:

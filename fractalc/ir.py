@@ -12,12 +12,22 @@ which fold constants: an expression with no `Param` or `Var` in it is a
 """
 from __future__ import annotations
 
+import enum
 import math
 import weakref
 from dataclasses import dataclass, fields
 from typing import Callable, Union
 
-REAL, INT, MASK, VEC3 = "real", "int", "mask", "vec3"
+
+class Type(str, enum.Enum):
+    """What an IR value is (a str, so that it reads as its name)."""
+    REAL = "real"       # a number per ray (or uniform)
+    INT = "int"         # a whole number
+    MASK = "mask"       # a truth value per ray
+    VEC3 = "vec3"       # three reals: the point, a library call's vector
+
+
+REAL, INT, MASK, VEC3 = Type.REAL, Type.INT, Type.MASK, Type.VEC3
 
 
 class _Interned(type):
@@ -154,30 +164,85 @@ def _python_round(x: float) -> float:
     return math.copysign(math.floor(abs(x) + 0.5), x)
 
 
-# op name -> (arity, Python evaluator used for folding, result type)
-OPS: dict[str, tuple[int, Callable, str]] = {
-    "+": (2, lambda a, b: a + b, REAL),
-    "-": (2, lambda a, b: a - b, REAL),
-    "*": (2, lambda a, b: a * b, REAL),
-    "/": (2, lambda a, b: a / b, REAL),
-    "neg": (1, lambda a: -a, REAL),
-    "sin": (1, math.sin, REAL), "cos": (1, math.cos, REAL), "tan": (1, math.tan, REAL),
-    "asin": (1, math.asin, REAL), "acos": (1, math.acos, REAL), "atan": (1, math.atan, REAL),
-    "atan2": (2, math.atan2, REAL),
-    "sqrt": (1, math.sqrt, REAL), "rsqrt": (1, lambda a: 1.0 / math.sqrt(a), REAL), "abs": (1, abs, REAL),
-    "min": (2, min, REAL), "max": (2, max, REAL),
-    "pow": (2, math.pow, REAL), "exp": (1, math.exp, REAL), "log": (1, math.log, REAL),
-    "floor": (1, math.floor, REAL), "round": (1, _python_round, REAL),
-    "clamp": (3, lambda x, lo, hi: min(max(x, lo), hi), REAL),
-    "mix": (3, lambda a, b, t: a + (b - a) * t, REAL),
-    "radians": (1, math.radians, REAL), "degrees": (1, math.degrees, REAL),
-    "lt": (2, lambda a, b: float(a < b), MASK),
-    "le": (2, lambda a, b: float(a <= b), MASK),
-    "eq": (2, lambda a, b: float(a == b), MASK),
-    "and": (2, lambda a, b: float(bool(a) and bool(b)), MASK),
-    "or": (2, lambda a, b: float(bool(a) or bool(b)), MASK),
-    "not": (1, lambda a: float(not a), MASK),
-    "select": (3, lambda c, a, b: a if c else b, REAL),
+@dataclass(frozen=True)
+class OpRule:
+    """One IR operation: how many arguments, its value in float64 (for
+    folding constants and for reference evaluation), what it gives, its C
+    text from its arguments' texts (None: the C function of that name),
+    and its derivative rule: the tangent of the result from the arguments
+    and their tangents (forward mode; None for masks, which have none)."""
+    arity: int
+    value: Callable
+    result: Type
+    c: Callable[..., str] | None
+    derivative: Callable | None
+
+
+def _d_quotient(a, b, da, db):
+    return div(sub(da, mul(div(a, b), db)), b)
+
+
+def _d_atan2(y, x, dy, dx):
+    return div(sub(mul(x, dy), mul(y, dx)), add(mul(x, x), mul(y, y)))
+
+
+def _d_pow(a, b, da, db):
+    # d(a^b) = a^b (db ln a + b da / a)
+    return mul(op("pow", a, b), add(mul(db, op("log", a)), div(mul(b, da), a)))
+
+
+def _d_clamp(x, lo, hi, dx, dlo, dhi):
+    return op("select", op("lt", x, lo), dlo, op("select", op("lt", hi, x), dhi, dx))
+
+
+def _one_over_root(a):
+    return div(const(1.0), op("sqrt", sub(const(1.0), mul(a, a))))
+
+
+# The IR's operations, the one table that folding, evaluating, rendering C
+# and differentiating read.
+OPS: dict[str, OpRule] = {
+    "+": OpRule(2, lambda a, b: a + b, REAL, lambda a, b: f"({a} + {b})", lambda a, b, da, db: add(da, db)),
+    "-": OpRule(2, lambda a, b: a - b, REAL, lambda a, b: f"({a} - {b})", lambda a, b, da, db: sub(da, db)),
+    "*": OpRule(2, lambda a, b: a * b, REAL, lambda a, b: f"({a} * {b})",
+                lambda a, b, da, db: add(mul(da, b), mul(a, db))),
+    "/": OpRule(2, lambda a, b: a / b, REAL, lambda a, b: f"({a} / {b})", _d_quotient),
+    "neg": OpRule(1, lambda a: -a, REAL, lambda a: f"(-{a})", lambda a, da: neg(da)),
+    "sin": OpRule(1, math.sin, REAL, None, lambda a, da: mul(op("cos", a), da)),
+    "cos": OpRule(1, math.cos, REAL, None, lambda a, da: neg(mul(op("sin", a), da))),
+    "tan": OpRule(1, math.tan, REAL, None, lambda a, da: div(da, mul(op("cos", a), op("cos", a)))),
+    "asin": OpRule(1, math.asin, REAL, None, lambda a, da: mul(_one_over_root(a), da)),
+    "acos": OpRule(1, math.acos, REAL, None, lambda a, da: neg(mul(_one_over_root(a), da))),
+    "atan": OpRule(1, math.atan, REAL, None, lambda a, da: div(da, add(const(1.0), mul(a, a)))),
+    "atan2": OpRule(2, math.atan2, REAL, None, _d_atan2),
+    "sqrt": OpRule(1, math.sqrt, REAL, None, lambda a, da: div(da, mul(const(2.0), op("sqrt", a)))),
+    "rsqrt": OpRule(1, lambda a: 1.0 / math.sqrt(a), REAL, None,
+                    lambda a, da: mul(mul(const(-0.5), div(op("rsqrt", a), a)), da)),
+    "abs": OpRule(1, abs, REAL, lambda a: f"fabs({a})",
+                  lambda a, da: op("select", op("lt", a, const(0.0)), neg(da), da)),
+    "min": OpRule(2, min, REAL, lambda a, b: f"fmin({a}, {b})",
+                  lambda a, b, da, db: op("select", op("lt", b, a), db, da)),
+    "max": OpRule(2, max, REAL, lambda a, b: f"fmax({a}, {b})",
+                  lambda a, b, da, db: op("select", op("lt", a, b), db, da)),
+    "pow": OpRule(2, math.pow, REAL, None, _d_pow),
+    "exp": OpRule(1, math.exp, REAL, None, lambda a, da: mul(op("exp", a), da)),
+    "log": OpRule(1, math.log, REAL, None, lambda a, da: div(da, a)),
+    "floor": OpRule(1, math.floor, REAL, None, lambda a, da: const(0.0)),
+    "round": OpRule(1, _python_round, REAL, None, lambda a, da: const(0.0)),
+    "clamp": OpRule(3, lambda x, lo, hi: min(max(x, lo), hi), REAL, None, _d_clamp),
+    "mix": OpRule(3, lambda a, b, t: a + (b - a) * t, REAL, None,
+                  lambda a, b, t, da, db, dt: add(add(da, mul(sub(db, da), t)), mul(sub(b, a), dt))),
+    "radians": OpRule(1, math.radians, REAL, None, lambda a, da: mul(da, const(math.pi / 180.0))),
+    "degrees": OpRule(1, math.degrees, REAL, None, lambda a, da: mul(da, const(180.0 / math.pi))),
+    "lt": OpRule(2, lambda a, b: float(a < b), MASK, lambda a, b: f"({a} < {b})", None),
+    "le": OpRule(2, lambda a, b: float(a <= b), MASK, lambda a, b: f"({a} <= {b})", None),
+    "eq": OpRule(2, lambda a, b: float(a == b), MASK, lambda a, b: f"({a} == {b})", None),
+    "and": OpRule(2, lambda a, b: float(bool(a) and bool(b)), MASK, lambda a, b: f"({a} & {b})", None),
+    "or": OpRule(2, lambda a, b: float(bool(a) or bool(b)), MASK, lambda a, b: f"({a} | {b})", None),
+    "not": OpRule(1, lambda a: float(not a), MASK, lambda a: f"(!{a})", None),
+    # rendered by the emitter: SELECT for a per-ray condition, ?: for a uniform one
+    "select": OpRule(3, lambda c, a, b: a if c else b, REAL, None,
+                     lambda c, a, b, dc, da, db: op("select", c, da, db)),
 }
 
 
@@ -189,10 +254,11 @@ def op(name: str, *args: Expr) -> Expr:
     """Build `Op(name, args)`, folded when every argument is constant.
     Raises ValueError/ZeroDivisionError/OverflowError for a constant
     argument outside the function's domain."""
-    arity, evaluate, result_type = OPS[name]
-    assert len(args) == arity, (name, args)
+    rule = OPS[name]
+    result_type = rule.result
+    assert len(args) == rule.arity, (name, args)
     if all(isinstance(a, Const) for a in args):
-        value = float(evaluate(*(a.value for a in args)))
+        value = float(rule.value(*(a.value for a in args)))
         if math.isnan(value) or math.isinf(value):
             raise ValueError(f"{name} gives a non-finite result")
         return Const(value, INT if result_type == MASK else REAL)
@@ -344,7 +410,7 @@ def evaluate(root: Expr, params) -> float:
         elif isinstance(node, Param):
             values[node] = float(params[node.index])
         elif isinstance(node, Op):
-            values[node] = float(OPS[node.op][1](*(values[a] for a in node.args)))
+            values[node] = float(OPS[node.op].value(*(values[a] for a in node.args)))
         else:
             raise ValueError(f"{node!r} depends on the point")
     return values[root]
