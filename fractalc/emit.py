@@ -78,19 +78,12 @@ class _FunctionWriter:
             for child in ir.children(node):
                 self.uses[child] = self.uses.get(child, 0) + 1
         self.varying = set()
-        self.levels: dict = {}     # the loop levels whose States a node depends on
         for node in self.nodes:
-            children = ir.children(node)
             # loops and branches run per ray (their rays stop or choose apart)
             if isinstance(node, (ir.Var, ir.Call, ir.State, ir.Loop, ir.Branch, ir.Out)) \
-                    or any(c in self.varying for c in children):
+                    or any(c in self.varying for c in ir.children(node)):
                 self.varying.add(node)
-            levels = frozenset().union(*(self.levels[c] for c in children))
-            if isinstance(node, ir.State):
-                levels = frozenset((node.level,))
-            elif isinstance(node, ir.Loop):
-                levels = levels - {node.level}
-            self.levels[node] = levels
+        self.levels = ir.state_levels((root,))   # the loop levels whose States a node depends on
         self.text: dict = {}
         self.depth: dict = {}      # how deeply a node's inlined text nests
         self.lines: list[str] = []

@@ -15,6 +15,8 @@ from __future__ import annotations
 import enum
 import math
 import weakref
+
+import numpy as np
 from dataclasses import dataclass, fields
 from typing import Callable, Union
 
@@ -398,6 +400,128 @@ def walk(root, children=children):
         stack.append((node, True))
         stack.extend((c, False) for c in reversed(children(node)))
     return order
+
+
+def _elementwise(rule: OpRule):
+    """The rule's float64 value over arrays; NaN outside its domain (as a
+    ray computing the side of a select it does not take)."""
+    def value(*args):
+        try:
+            return float(rule.value(*args))
+        except (ValueError, ZeroDivisionError, OverflowError):
+            return math.nan
+    return np.frompyfunc(value, rule.arity, 1)
+
+
+def evaluate_at(roots: tuple, points, params=()) -> list:
+    """The float64 values of `roots` (expressions of the point, loops and
+    branches included) at (N, 3) `points`: the IR's meaning, which the
+    kernel computes in float or double. Slow; for tests and checks."""
+    points = np.asarray(points, dtype=np.float64)
+    ones = np.ones(len(points))
+    rules = {name: _elementwise(rule) for name, rule in OPS.items()}
+
+    def outside(node):
+        return (*node.init, node.count) if isinstance(node, Loop) else children(node)
+
+    def run(roots, memo):
+        for root in roots:
+            for node in walk(root, outside):
+                if node not in memo:
+                    memo[node] = compute(node, memo)
+        return [memo[r] for r in roots]
+
+    def compute(node, memo):
+        if isinstance(node, Const):
+            return node.value * ones
+        if isinstance(node, Param):
+            return float(params[node.index]) * ones
+        if isinstance(node, Var):
+            return points
+        if isinstance(node, Comp) and isinstance(node.vector, Var):
+            return points[:, node.index]
+        if isinstance(node, Op):
+            return rules[node.op](*(memo[a] for a in node.args)).astype(np.float64)
+        if isinstance(node, Vec):
+            return tuple(memo[c] for c in node.items)
+        if isinstance(node, Out):
+            return memo[node.source][node.index]
+        if isinstance(node, Branch):
+            condition = memo[node.condition] != 0
+            return [np.where(condition, memo[t], memo[f]) for t, f in zip(node.then, node.otherwise)]
+        if isinstance(node, Loop):
+            state = [memo[e] for e in node.init]
+            active = ones != 0
+            for _ in range(int(memo[node.count][0])):
+                inner = {k: v for k, v in memo.items() if node.level not in levels[k]}
+                inner.update((State(node.level, i, e.type), v) for i, (e, v) in enumerate(zip(node.init, state)))
+                if node.condition is not None:
+                    active = active & (run((node.condition,), inner)[0] != 0)
+                    if not active.any():
+                        break
+                state = [np.where(active, n, s) for n, s in zip(run(node.next, inner), state)]
+            return state
+        raise ValueError(f"cannot evaluate {type(node).__name__} here")
+
+    levels = state_levels(roots)
+    with np.errstate(all="ignore"):
+        return run(tuple(roots), {})
+
+
+def _with_children(node, new: list):
+    """`node` with its children (in `children` order) replaced by `new`."""
+    if isinstance(node, Op):
+        return Op(node.op, tuple(new), node.type)
+    if isinstance(node, Call):
+        return Call(node.function, tuple(new), node.type)
+    if isinstance(node, Comp):
+        return Comp(new[0], node.index, node.type)
+    if isinstance(node, Vec):
+        return Vec(tuple(new))
+    if isinstance(node, Out):
+        return Out(new[0], node.index, node.type)
+    if isinstance(node, Branch):
+        n = len(node.then)
+        return Branch(new[0], tuple(new[1:1 + n]), tuple(new[1 + n:]))
+    if isinstance(node, Loop):
+        n, m = len(node.init), len(node.next)
+        condition = None if node.condition is None else new[n + m]
+        return Loop(node.level, tuple(new[:n]), tuple(new[n:n + m]), condition, new[-1])
+    return node
+
+
+def rebuild(roots: tuple, replacements: dict) -> tuple:
+    """`roots` with each node that is a key of `replacements` replaced by
+    its value, and every node above one rebuilt."""
+    made: dict = {}
+    for root in roots:
+        for node in walk(root):
+            if node in made:
+                continue
+            if node in replacements:
+                made[node] = replacements[node]
+                continue
+            old = children(node)
+            new = [made[c] for c in old]
+            made[node] = node if all(a is b for a, b in zip(old, new)) else _with_children(node, new)
+    return tuple(made[r] for r in roots)
+
+
+def state_levels(roots) -> dict:
+    """For every node under `roots`, the loop levels whose States it
+    depends on (a loop's own level not counted for its results)."""
+    levels: dict = {}
+    for root in roots:
+        for node in walk(root):
+            if node in levels:
+                continue
+            found = frozenset().union(*(levels[c] for c in children(node)))
+            if isinstance(node, State):
+                found = frozenset((node.level,))
+            elif isinstance(node, Loop):
+                found = found - {node.level}
+            levels[node] = found
+    return levels
 
 
 def evaluate(root: Expr, params) -> float:
