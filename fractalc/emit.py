@@ -86,6 +86,7 @@ class _FunctionWriter:
         self.levels = ir.state_levels((root,))   # the loop levels whose States a node depends on
         self.text: dict = {}
         self.depth: dict = {}      # how deeply a node's inlined text nests
+        self.active: list = []     # the active masks of the loops being written (None: no condition)
         self.lines: list[str] = []
         self.counts: dict[str, int] = {}
 
@@ -159,7 +160,9 @@ class _FunctionWriter:
             self.block(node.condition, inside)
             self.lines += [f"{inside}{active} = {active} & {self.text[node.condition]};",
                            f"{inside}if (!ANY({active})) break;"]
+        self.active.append(active)
         self.block(node.next, inside)
+        self.active.pop()
         updates = [self.declare(_C_TYPES[e.type], self.argument(e), inside, "n") for e in node.next]
         for name, update in zip(names, updates):
             value = update if active is None else f"SELECT({name}, {update}, {active})"
@@ -175,7 +178,11 @@ class _FunctionWriter:
         condition = self.text[node.condition]
         if node.condition in self.varying:
             names = [self.declare(t, self.argument(e), indent, "b") for t, e in zip(types, node.otherwise)]
-            if self.depth[node.condition]:
+            # in a loop, rays that have stopped iterating need neither side
+            stopped = [a for a in self.active if a is not None]
+            if stopped:
+                condition = " & ".join([condition, *stopped])
+            if self.depth[node.condition] or stopped:
                 condition = self.declare("mask", condition, indent)
             self.lines.append(f"{indent}if (ANY({condition})) {{")
             self.block(node.then, inside)
