@@ -32,9 +32,11 @@ class Value:
 
 _ERROR = Value("error", None)
 
-# Primitives a scene may have, counting a let each time it is used: generated
-# scenes have tens of thousands; a kernel of this many builds in minutes.
-MAX_SHAPES = 20_000
+# Parts (primitives, transforms, combinations) a scene may have, counting a
+# let each time it is used: generated scenes have thousands of shapes, each
+# translated and coloured. The kernel's build time grows faster than its
+# size: about 1000 s for a union of 10000 spheres on 2 cores.
+MAX_SHAPES = 50_000
 # The largest float: a number beyond it is infinite in a float kernel
 FLOAT_MAX = 3.4028234663852886e38
 
@@ -518,15 +520,15 @@ class _Checker:
         return self.shape(Transformed(e.name, receiver.data, args, e.span))
 
     def shape(self, shape: Shape) -> Value:
-        """A shape value, counted: the kernel evaluates every primitive of
-        the shape with each let expanded where it is used, so a let used
-        twice in each of a chain of lets doubles it each time."""
+        """A shape value, counted: the kernel computes every part of the
+        shape with each let expanded where it is used, so a let used twice
+        in each of a chain of lets doubles it each time."""
         parts = shape.shapes if isinstance(shape, Combination) else \
             () if isinstance(shape, Primitive) else (shape.shape,)
-        size = sum(self.shape_sizes[id(p)][1] for p in parts) if parts else 1
+        size = 1 + sum(self.shape_sizes[id(p)][1] for p in parts)
         if size > MAX_SHAPES:
-            self.fail(shape.span, f"this shape is made of {size} primitives once its lets are expanded, "
-                                  f"more than the {MAX_SHAPES} a scene may have")
+            self.fail(shape.span, f"this shape has {size} parts (primitives, transforms, combinations) once "
+                                  f"its lets are expanded, more than the {MAX_SHAPES} a scene may have")
         self.shape_sizes[id(shape)] = (shape, size)   # the shape kept alive: ids stay unique
         return Value(SHAPE, shape)
 

@@ -156,7 +156,7 @@ def test_lets_that_double_the_scene_each_time_are_a_located_error(tmp_path, caps
     lines = ["let s0 = sphere(0.1)"] + [f"let s{i} = union(s{i - 1}, s{i - 1}.translate((0.1, 0, 0)))"
                                         for i in range(1, 40)]
     printed = _check_errors("\n".join(lines) + "\nscene s39\n", tmp_path, capsys)
-    assert ":16:11: error: this shape is made of 32768 primitives" in printed
+    assert ":16:11: error: this shape has 98302 parts" in printed
 
 
 # ---- numbers that overflow -------------------------------------------------
