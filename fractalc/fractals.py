@@ -39,17 +39,6 @@ def _scale(a: Vector, s: ir.Expr) -> Vector:
     return tuple(ir.mul(x, s) for x in a)
 
 
-def _dot(a: Vector, b: Vector) -> ir.Expr:
-    total = ir.mul(a[0], b[0])
-    for x, y in zip(a[1:], b[1:]):
-        total = ir.add(total, ir.mul(x, y))
-    return total
-
-
-def _length(a: Vector) -> ir.Expr:
-    return ir.op("sqrt", _dot(a, a))
-
-
 def _select(condition: ir.Expr, if_true: Vector, if_false: Vector) -> Vector:
     return tuple(ir.op("select", condition, t, f) for t, f in zip(if_true, if_false))
 
@@ -63,7 +52,7 @@ def _trap_add(trap: Vector, z: Vector, keep: ir.Expr | None = None) -> Vector:
     trap carried, none added."""
     if not trap:
         return ()
-    added = (ir.op("min", trap[0], _length(z)),
+    added = (ir.op("min", trap[0], ir.length(z)),
              *(ir.op("min", t, ir.op("abs", c)) for t, c in zip(trap[1:], z)))
     return added if keep is None else _select(keep, trap, added)
 
@@ -123,7 +112,7 @@ def mandelbulb(p: Vector, power: ir.Expr, iterations: ir.Expr, bailout: ir.Expr,
     1e24 (only bounded orbits get there, whose DE is below 1e-20 either
     way), so n r^(n-1) dr stays below 1e38."""
     def radius(state):
-        return _length(state[:3])
+        return ir.length(state[:3])
 
     def step(state):
         z, dr, log_scale, trap = state[:3], state[3], state[4], state[6:]
@@ -157,7 +146,7 @@ def mandelbulb(p: Vector, power: ir.Expr, iterations: ir.Expr, bailout: ir.Expr,
 
     final = ir.loop((*p, _c(1.0), _c(0.0), NO_ESCAPE, *_trap_start(trap)), iterations, step, going_on)
     z, dr, log_scale = final[:3], final[3], final[4]
-    r = _length(z)
+    r = ir.length(z)
     de = ir.div(ir.mul(ir.mul(_c(0.5), ir.add(ir.op("log", r), log_scale)), r), dr)
     # DE = 0 at r = 0; min() keeps it finite where |p| overflows (> 1e19 in float)
     return Orbit(ir.op("select", ir.op("eq", r, _c(0.0)), _c(0.0), ir.op("min", de, _c(1e30))), final[6:])
@@ -176,7 +165,7 @@ def julia(p: Vector, c: ir.Vec, slice_: ir.Expr, iterations: ir.Expr, bailout: i
     from a larger |q| escapes, q and dr stored divided by |q|^2, whose log
     goes to `log_scale`. dr is capped at 1e30."""
     def squared(state):
-        return _dot(state[:4], state[:4])
+        return ir.dot(state[:4], state[:4])
 
     def step(state):
         q, dr, log_scale, trap = state[:4], state[4], state[5], state[7:]
@@ -184,7 +173,7 @@ def julia(p: Vector, c: ir.Vec, slice_: ir.Expr, iterations: ir.Expr, bailout: i
         r = ir.op("sqrt", r2)
         x, y, z, w = q
         # q^2 = (x^2 - |v|^2, 2 x v) for q = (x, v)
-        square = (ir.sub(ir.mul(x, x), _dot(q[1:], q[1:])), *(ir.mul(ir.mul(_c(2.0), x), v) for v in q[1:]))
+        square = (ir.sub(ir.mul(x, x), ir.dot(q[1:], q[1:])), *(ir.mul(ir.mul(_c(2.0), x), v) for v in q[1:]))
         escapes = ir.op("lt", _c(1e12), r2)
         scale, log_new = ir.branch(escapes, lambda: (ir.div(_c(1.0), r2), ir.op("log", r2)), (_c(1.0), log_scale))
         q_new = tuple(ir.mul(ir.add(s, k), scale) for s, k in zip(square, c.items))
@@ -196,7 +185,7 @@ def julia(p: Vector, c: ir.Vec, slice_: ir.Expr, iterations: ir.Expr, bailout: i
 
     final = ir.loop((*p, slice_, _c(1.0), _c(0.0), NO_ESCAPE, *_trap_start(trap)), iterations, step, going_on)
     q, dr, log_scale = final[:4], final[4], final[5]
-    r = _length(q)
+    r = ir.length(q)
     de = ir.div(ir.mul(ir.mul(_c(0.5), ir.add(ir.op("log", r), log_scale)), r), dr)
     # DE = 0 at r = 0 or dr = 0; min() keeps it finite where |p| overflows
     degenerate = ir.op("or", ir.op("eq", r, _c(0.0)), ir.op("eq", dr, _c(0.0)))
@@ -229,7 +218,7 @@ def mandelbox(p: Vector, scale: ir.Expr, min_radius: ir.Expr, fixed_radius: ir.E
         z = tuple(ir.sub(ir.mul(ir.op("clamp", c, ir.neg(limit), limit), _c(2.0)), c) for c in z)
         # sphere fold: the factor fixed^2 / r^2 clamped to [1, fixed^2 / min^2]
         # (the floor on r^2 keeps 0 / 0 out once k^2 has underflowed)
-        r2 = ir.op("max", _dot(z, z), _c(FLT_MIN))
+        r2 = ir.op("max", ir.dot(z, z), _c(FLT_MIN))
         fold = ir.op("clamp", ir.div(ir.mul(fixed2, ir.mul(k, k)), r2), _c(1.0), ir.div(fixed2, min2))
         z = _add(_scale(z, ir.mul(fold, scale)), _scale(p, k))
         dr = ir.add(ir.mul(ir.mul(dr, fold), ir.op("abs", scale)), k)
@@ -246,7 +235,7 @@ def mandelbox(p: Vector, scale: ir.Expr, min_radius: ir.Expr, fixed_radius: ir.E
 
     final = ir.loop((*p, _c(1.0), _c(1.0), *_trap_start(trap)), iterations, step)
     # dr > 0; the floor only matters once k has underflowed to 0 inside the set
-    return Orbit(ir.div(_length(final[:3]), ir.op("max", final[3], _c(1e-30))), final[5:])
+    return Orbit(ir.div(ir.length(final[:3]), ir.op("max", final[3], _c(1e-30))), final[5:])
 
 
 # ---- the Menger sponge -------------------------------------------------------------
@@ -264,7 +253,7 @@ def menger(p: Vector, level: ir.Expr, trap: bool = False) -> Orbit:
     3a - 2 enters the next level's cell (cells 3^-n the cube's size)."""
     p = _clamped(p)
     q = tuple(ir.sub(ir.op("abs", c), _c(1.0)) for c in p)
-    outside = _length(tuple(ir.op("max", c, _c(0.0)) for c in q))
+    outside = ir.length(tuple(ir.op("max", c, _c(0.0)) for c in q))
     cube = ir.add(outside, ir.op("min", ir.op("max", q[0], ir.op("max", q[1], q[2])), _c(0.0)))
     third = 1.0 / 3.0
 
@@ -274,7 +263,7 @@ def menger(p: Vector, level: ir.Expr, trap: bool = False) -> Orbit:
         middle = ir.op("max", ir.op("min", a[0], a[1]), ir.op("min", ir.op("max", a[0], a[1]), a[2]))
         # signed distance to the nearest bar, the one along the largest axis
         u, v = ir.sub(middle, _c(third)), ir.sub(lowest, _c(third))
-        bar = ir.add(_length((ir.op("max", u, _c(0.0)), ir.op("max", v, _c(0.0)))),
+        bar = ir.add(ir.length((ir.op("max", u, _c(0.0)), ir.op("max", v, _c(0.0)))),
                      ir.op("min", ir.op("max", u, v), _c(0.0)))
         d = ir.op("max", d, ir.neg(ir.mul(bar, size)))
         # each coordinate as the coordinate of the third it falls in
@@ -318,7 +307,7 @@ def _sierpinski_tetrahedron(p: Vector) -> ir.Expr:
     z = ir.op("min", p[0], ir.op("min", p[1], p[2]))
     y = ir.op("max", ir.op("min", p[0], p[1]), ir.op("min", ir.op("max", p[0], p[1]), p[2]))
     t = ir.op("min", ir.mul(_c(0.5), ir.sub(x, y)), _c(1.0))
-    edge = _length((ir.sub(x, t), ir.add(y, t), ir.add(z, _c(1.0))))
+    edge = ir.length((ir.sub(x, t), ir.add(y, t), ir.add(z, _c(1.0))))
     past_edge = ir.op("lt", _c(0.0), ir.sub(ir.sub(ir.add(x, y), ir.mul(_c(2.0), z)), _c(2.0)))
     outside = ir.op("select", past_edge, edge, plane)
     return ir.op("select", ir.op("le", plane, _c(0.0)), plane, outside)

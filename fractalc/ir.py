@@ -319,6 +319,18 @@ def vec(*items: Expr) -> Vec:
     return Vec(tuple(items))
 
 
+def dot(a, b) -> Expr:
+    """The dot product of two tuples of values."""
+    total = mul(a[0], b[0])
+    for x, y in zip(a[1:], b[1:]):
+        total = add(total, mul(x, y))
+    return total
+
+
+def length(a) -> Expr:
+    return op("sqrt", dot(a, a))
+
+
 # ---- loops and branches --------------------------------------------------------
 
 _loop_level = [0]      # nesting of the loop bodies being built

@@ -7,30 +7,25 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fractalc import derive, fractals, ir
-from fractalc.emit import double_literals, function_source
+from fractalc import derive, formulas, fractals, ir
+from fractalc.emit import function_source
+from kernel_harness import evaluate_in_kernel
 
 P = ir.components(ir.Var("p", ir.VEC3))
 RNG = np.random.default_rng(20261127)
 
 
-def _length(z):
-    return fractals._length(z)
-
-
 def triplex_power(z, power):
-    """z^power of the Mandelbulb, with no running derivative: the compiler
-    derives it."""
-    r = _length(z)
-    scale = ir.op("exp", ir.mul(power, ir.op("log", r)))
-    return tuple(ir.mul(c, scale) for c in fractals._mandelbulb_direction(z, r, power))
+    """z^power of the Mandelbulb, its running derivative left to the
+    compiler."""
+    return formulas.triplex_power(z, power).z
 
 
 def mandelbulb_z(power: float, iterations: int, bailout: float):
     def step(state):
         return tuple(ir.add(c, q) for c, q in zip(triplex_power(state, ir.const(power)), P))
     return ir.loop(tuple(P), ir.Const(float(iterations), ir.INT), step,
-                   lambda state: ir.op("le", _length(state), ir.const(bailout)))
+                   lambda state: ir.op("le", ir.length(state), ir.const(bailout)))
 
 
 def mandelbox_z(scale: float, iterations: int, julia: tuple | None = None):
@@ -43,7 +38,7 @@ def mandelbox_z(scale: float, iterations: int, julia: tuple | None = None):
     def step(state):
         z, dr = state[:3], state[3]
         z = tuple(ir.sub(ir.mul(ir.op("clamp", c, ir.const(-1.0), ir.const(1.0)), ir.const(2.0)), c) for c in z)
-        r2 = fractals._dot(z, z)
+        r2 = ir.dot(z, z)
         factor = ir.op("select", ir.op("lt", r2, ir.const(0.25)), ir.const(4.0),
                        ir.op("select", ir.op("lt", r2, ir.const(1.0)), ir.div(ir.const(1.0), r2), ir.const(1.0)))
         z = tuple(ir.add(ir.mul(ir.mul(c, factor), ir.const(scale)), q) for c, q in zip(z, added))
@@ -56,10 +51,10 @@ def julia_q(iterations: int):
 
     def step(q):
         x, rest = q[0], q[1:]
-        square = (ir.sub(ir.mul(x, x), fractals._dot(rest, rest)), *(ir.mul(ir.mul(ir.const(2.0), x), v) for v in rest))
+        square = (ir.sub(ir.mul(x, x), ir.dot(rest, rest)), *(ir.mul(ir.mul(ir.const(2.0), x), v) for v in rest))
         return tuple(ir.add(s, ir.const(k)) for s, k in zip(square, c))
     return ir.loop((*P, ir.const(0.0)), ir.Const(float(iterations), ir.INT), step,
-                   lambda q: ir.op("le", fractals._length(q), ir.const(4.0)))
+                   lambda q: ir.op("le", ir.length(q), ir.const(4.0)))
 
 
 def finite_differences(values, points, h=1e-6):
@@ -118,7 +113,7 @@ def test_on_a_conformal_formula_the_jacobian_estimate_is_the_scalar_one():
     z, dr = loop[:3], loop[3]
     rebuilt, rows = derive.jacobian(z, P)
     jacobian_estimate = derive.linear_estimate(rebuilt, rows)
-    scalar_estimate = ir.div(_length(z), dr)
+    scalar_estimate = ir.div(ir.length(z), dr)
     points = RNG.uniform(-2.0, 2.0, (200, 3))
     a, b = ir.evaluate_at((jacobian_estimate, scalar_estimate), points)
     assert np.allclose(a, b, rtol=1e-9, atol=0)
@@ -153,32 +148,10 @@ def test_a_library_call_has_no_derivative():
 @pytest.mark.parametrize("precision, tolerance", [("float", 2e-4), ("double", 1e-10)])
 @pytest.mark.parametrize("lanes", [1, 8])
 def test_the_derived_estimate_in_the_kernel_matches_its_float64_meaning(precision, tolerance, lanes):
-    import pyopencl as cl
-    import fractalc
-    from fractalc.stdlib import library
     rebuilt, rows = derive.jacobian(mandelbulb_z(8.0, 8, 2.0), P)
     estimate = derive.escape_time_estimate(rebuilt, rows)
-    source = "\n".join([
-        f"#define LANES {lanes}", f"#define PRECISION_DOUBLE {int(precision == 'double')}", "#define FAST_MATH 0",
-        library().prelude, function_source(estimate, "real f(vec3 p, __constant scalar *params)"),
-        "__kernel void run(__global const scalar *x, __global const scalar *y, __global const scalar *z,",
-        "                  __constant scalar *params, __global scalar *out) {",
-        "    int i = get_global_id(0);",
-        "    STORE_LANES(f(v3(LOAD_LANES(i, x), LOAD_LANES(i, y), LOAD_LANES(i, z)), params), i, out);", "}"])
-    if precision == "double":
-        source = double_literals(source)
-    device = fractalc.loads("scene sphere(1)").device
-    program = cl.Program(device.context, source).build()
     points = RNG.uniform(-1.3, 1.3, (256, 3))
-    dtype = np.float64 if precision == "double" else np.float32
-    flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
-    buffers = [cl.Buffer(device.context, flags, hostbuf=np.ascontiguousarray(points[:, k], dtype=dtype))
-               for k in range(3)]
-    params = cl.Buffer(device.context, flags, hostbuf=np.zeros(1, dtype))
-    out = np.empty(len(points), dtype)
-    out_buffer = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY, out.nbytes)
-    program.run(device.queue, (len(points) // lanes,), None, *buffers, params, out_buffer)
-    cl.enqueue_copy(device.queue, out, out_buffer)
+    out = evaluate_in_kernel(estimate, points, precision, lanes)
     expected, = ir.evaluate_at((estimate,), points)
     error = np.abs(out - expected) / np.maximum(np.abs(expected), 1e-3)
     assert np.isfinite(out).all() and np.percentile(error, 99) < tolerance, np.percentile(error, [50, 99])

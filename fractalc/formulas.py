@@ -1,0 +1,241 @@
+"""Fractal formulas from building blocks, and their distance estimates.
+
+A formula is one iteration step over a state: the point `z` (and a fourth
+component `w` for quaternion formulas) and the constant `c` (the sample
+point, or a Julia constant). It is written with the building blocks below,
+each an IR expression of z with, where it has one, its conformal factor:
+the scalar by which it scales lengths around z (a similarity at every
+point: folds, reflections, rotations, uniform scales, sphere folds and
+inversions). When every block of a formula has one, the running
+derivative is the scalar dr -> factor dr (+ 1 where c is the point), exact
+and cheap (Syntopia, "Distance Estimated 3D Fractals", part VI); otherwise
+the compiler carries the Jacobian (fractalc/derive.py, part VII). The
+triplex power of the Mandelbulb is not conformal; its standard scalar rule
+n r^(n-1) is the `approximate` factor the contract defines (part V).
+
+`orbit(...)` runs a formula, or a hybrid of several, for a number of
+iterations with a bailout and gives the estimate of its kind: escape-time
+(0.5 r ln r / |dr|) or linear ((r - offset) / |dr|).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+from . import derive, ir
+
+Vector = tuple[ir.Expr, ...]
+
+
+@dataclass(frozen=True)
+class Block:
+    """A building block's result: the new z, and the factor by which it
+    scales lengths (None: not conformal; `approximate`: a standard scalar
+    rule that is not exact)."""
+    z: Vector
+    factor: ir.Expr | None
+    approximate: bool = False
+
+
+def _c(value: float) -> ir.Expr:
+    return ir.const(value)
+
+
+def _scaled(z: Vector, s: ir.Expr) -> Vector:
+    return tuple(ir.mul(c, s) for c in z)
+
+
+# ---- building blocks ------------------------------------------------------------
+
+def box_fold(z: Vector, limit: ir.Expr) -> Block:
+    """Each coordinate beyond +-limit reflected back inside (Tom Lowe)."""
+    return Block(tuple(ir.sub(ir.mul(ir.op("clamp", c, ir.neg(limit), limit), _c(2.0)), c) for c in z), _c(1.0))
+
+
+def sphere_fold(z: Vector, min_radius: ir.Expr, fixed_radius: ir.Expr) -> Block:
+    """Inversion in the sphere of `fixed_radius` inside it, a uniform scale
+    inside `min_radius`: the factor fixed^2 / r^2 clamped to [1, fixed^2 / min^2]."""
+    fixed2 = ir.mul(fixed_radius, fixed_radius)
+    r2 = ir.op("max", ir.dot(z, z), _c(1e-30))
+    factor = ir.op("clamp", ir.div(fixed2, r2), _c(1.0), ir.div(fixed2, ir.mul(min_radius, min_radius)))
+    return Block(_scaled(z, factor), factor)
+
+
+def sphere_invert(z: Vector, radius: ir.Expr) -> Block:
+    """z R^2 / |z|^2: inversion in the sphere of radius R."""
+    factor = ir.div(ir.mul(radius, radius), ir.op("max", ir.dot(z, z), _c(1e-30)))
+    return Block(_scaled(z, factor), factor)
+
+
+def reflect(z: Vector, normal: Vector, offset: ir.Expr = _c(0.0)) -> Block:
+    """Mirror image in the plane n.z = offset (n normalised here)."""
+    n = _scaled(normal, ir.div(_c(1.0), ir.length(normal)))
+    side = ir.sub(ir.dot(n, z), offset)
+    return Block(tuple(ir.sub(c, ir.mul(ir.mul(_c(2.0), side), k)) for c, k in zip(z, n)), _c(1.0))
+
+
+def plane_fold(z: Vector, normal: Vector, offset: ir.Expr = _c(0.0)) -> Block:
+    """z moved to the side of the plane n.z = offset that n points to
+    (reflected where it is behind): kaleidoscopic IFS folds."""
+    n = _scaled(normal, ir.div(_c(1.0), ir.length(normal)))
+    behind = ir.op("min", ir.sub(ir.dot(n, z), offset), _c(0.0))
+    return Block(tuple(ir.sub(c, ir.mul(ir.mul(_c(2.0), behind), k)) for c, k in zip(z, n)), _c(1.0))
+
+
+def abs_fold(z: Vector) -> Block:
+    """Every coordinate made positive: the octant fold."""
+    return Block(tuple(ir.op("abs", c) for c in z), _c(1.0))
+
+
+def sort_fold(z: Vector) -> Block:
+    """Coordinates sorted largest first: the Menger sponge's folds about
+    the planes x = y, x = z, y = z."""
+    x, y, w = z
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        point = [x, y, w]
+        point[a], point[b] = ir.op("max", point[a], point[b]), ir.op("min", point[a], point[b])
+        x, y, w = point
+    return Block((x, y, w), _c(1.0))
+
+
+def rotate(z: Vector, axis: Vector, degrees: ir.Expr) -> Block:
+    """Right-handed rotation about `axis` (Rodrigues)."""
+    k = _scaled(axis, ir.div(_c(1.0), ir.length(axis)))
+    angle = ir.mul(degrees, _c(math.pi / 180.0))
+    cos, sin = ir.op("cos", angle), ir.op("sin", angle)
+    k_dot_z = ir.dot(k, z)
+    cross = (ir.sub(ir.mul(k[1], z[2]), ir.mul(k[2], z[1])), ir.sub(ir.mul(k[2], z[0]), ir.mul(k[0], z[2])),
+             ir.sub(ir.mul(k[0], z[1]), ir.mul(k[1], z[0])))
+    turned = tuple(ir.add(ir.add(ir.mul(c, cos), ir.mul(x, sin)), ir.mul(ki, ir.mul(k_dot_z, ir.sub(_c(1.0), cos))))
+                   for c, x, ki in zip(z, cross, k))
+    return Block(turned, _c(1.0))
+
+
+def scale(z: Vector, factor: ir.Expr, centre: Vector | None = None) -> Block:
+    """s (z - centre) + centre: a uniform scale, |s| on lengths."""
+    if centre is None:
+        return Block(_scaled(z, factor), ir.op("abs", factor))
+    return Block(tuple(ir.add(ir.mul(factor, ir.sub(c, o)), o) for c, o in zip(z, centre)), ir.op("abs", factor))
+
+
+def stretch(z: Vector, factors: Vector) -> Block:
+    """A different scale on each axis: not conformal."""
+    return Block(tuple(ir.mul(c, f) for c, f in zip(z, factors)), None)
+
+
+def translate(z: Vector, offset: Vector) -> Block:
+    return Block(tuple(ir.add(c, o) for c, o in zip(z, offset)), _c(1.0))
+
+
+def triplex_power(z: Vector, power: ir.Expr) -> Block:
+    """White and Nylander's z^n in spherical coordinates (theta from the z
+    axis, 0 at r = 0), with the Mandelbulb's standard scalar rule
+    n r^(n-1) as its approximate factor."""
+    r = ir.length(z)
+    polar = ir.op("acos", ir.op("clamp", ir.div(z[2], r), _c(-1.0), _c(1.0)))
+    theta = ir.mul(ir.op("select", ir.op("eq", r, _c(0.0)), _c(0.0), polar), power)
+    phi = ir.mul(ir.op("atan2", z[1], z[0]), power)
+    log_r = ir.op("log", r)
+    r_power = ir.op("exp", ir.mul(power, log_r))
+    sin_theta = ir.op("sin", theta)
+    direction = (ir.mul(sin_theta, ir.op("cos", phi)), ir.mul(ir.op("sin", phi), sin_theta), ir.op("cos", theta))
+    factor = ir.mul(power, ir.op("exp", ir.mul(ir.sub(power, _c(1.0)), log_r)))
+    return Block(_scaled(direction, r_power), factor, approximate=True)
+
+
+def quaternion_square(q: Vector) -> Block:
+    """q^2 = (x^2 - |v|^2, 2 x v) for q = (x, v): conformal, factor 2|q|."""
+    x, rest = q[0], q[1:]
+    square = (ir.sub(ir.mul(x, x), ir.dot(rest, rest)), *(ir.mul(ir.mul(_c(2.0), x), v) for v in rest))
+    return Block(square, ir.mul(_c(2.0), ir.length(q)))
+
+
+def quaternion_multiply(a: Vector, b: Vector) -> Vector:
+    """The Hamilton product a b (real part first); a tool for formulas,
+    not a step of its own."""
+    (a0, a1, a2, a3), (b0, b1, b2, b3) = a, b
+    m, s, p = ir.mul, ir.sub, ir.add
+    return (s(s(s(m(a0, b0), m(a1, b1)), m(a2, b2)), m(a3, b3)),
+            s(p(p(m(a0, b1), m(a1, b0)), m(a2, b3)), m(a3, b2)),
+            p(s(p(m(a0, b2), m(a1, b3)), m(a2, b0)), m(a3, b1)),
+            p(p(s(m(a0, b3), m(a1, b2)), m(a2, b1)), m(a3, b0)))
+
+
+# ---- formulas and hybrids --------------------------------------------------------
+
+@dataclass(frozen=True)
+class Formula:
+    """One iteration step: `step(z, c)` gives the blocks applied in turn
+    (the last one's z is the new z) and whether c is added after them."""
+    name: str
+    step: Callable[[Vector, Vector], list[Block]]
+    dimensions: int = 3              # 4: quaternion state (x, y, z, w)
+    adds_c: bool = True
+
+
+@dataclass(frozen=True)
+class Estimate:
+    distance: ir.Expr
+    scalar: bool                     # by a scalar running derivative (else the Jacobian)
+    z: Vector                        # the orbit's last point
+
+
+def _apply(formula: Formula, z: Vector, c: Vector) -> tuple[Vector, ir.Expr | None, bool]:
+    """z after one step, the product of its blocks' factors (None if one
+    is not conformal) and whether that factor is approximate."""
+    factor, approximate = _c(1.0), False
+    for block in formula.step(z, c):
+        z = block.z
+        factor = None if factor is None or block.factor is None else ir.mul(factor, block.factor)
+        approximate = approximate or block.approximate
+    if formula.adds_c:
+        z = tuple(ir.add(a, b) for a, b in zip(z, c))
+    return z, factor, approximate
+
+
+def orbit(point: Vector, sequence: list[tuple[Formula, int]], iterations: ir.Expr, bailout: ir.Expr,
+          kind: str = "escape", offset: ir.Expr = _c(0.0), julia: Vector | None = None,
+          jacobian: bool | None = None) -> Estimate:
+    """The estimate of a hybrid: the formulas of `sequence` applied in turn
+    (each its count of times) per round, `iterations` rounds, a ray
+    stopping once |z| > bailout (checked before every step). `kind`:
+    "escape" or "linear". `julia`: c is that constant, not the point.
+    The scalar running derivative is used where every step is conformal
+    (or approximately so), unless `jacobian` asks for the Jacobian."""
+    dimensions = max(f.dimensions for f, _ in sequence)
+    c = tuple(julia) if julia is not None else (*point, *(_c(0.0),) * (dimensions - 3))
+    start = (*point, *(_c(0.0),) * (dimensions - 3))
+    steps = [f for f, count in sequence for _ in range(count)]
+    adds_point = julia is None
+    conformal = all(_apply(f, start, c)[1] is not None for f in set(steps))
+    use_scalar = conformal if jacobian is None else not jacobian
+
+    def round_(state):
+        z, dr, stopped = state[:dimensions], state[dimensions], state[dimensions + 1]
+        for formula in steps:
+            going = ir.op("and", ir.op("not", stopped), ir.op("le", ir.length(z), bailout))
+            moved, factor, _ = _apply(formula, z, c)
+            # the cap keeps bounded orbits' dr finite (their estimate is ~0 either way)
+            dr_moved = ir.op("min", ir.add(ir.mul(dr, factor), _c(1.0 if adds_point and formula.adds_c else 0.0)),
+                             _c(1e30)) if use_scalar else dr
+            z = tuple(ir.op("select", going, a, b) for a, b in zip(moved, z))
+            dr = ir.op("select", going, dr_moved, dr)
+            stopped = ir.op("not", going)
+        return (*z, dr, stopped)
+
+    final = ir.loop((*start, _c(1.0), ir.Const(0.0, ir.MASK)), iterations, round_,
+                    lambda state: ir.op("not", state[dimensions + 1]))
+    z, dr = final[:dimensions], final[dimensions]
+    if use_scalar:
+        r = ir.length(z)
+        if kind == "escape":
+            de = ir.div(ir.mul(ir.mul(_c(0.5), ir.op("log", r)), r), ir.op("abs", dr))
+            de = ir.op("select", ir.op("eq", r, _c(0.0)), _c(0.0), ir.op("min", de, _c(1e30)))
+        else:
+            de = ir.div(ir.sub(r, offset), ir.op("abs", dr))
+        return Estimate(de, True, z)
+    rebuilt, rows = derive.jacobian(z, point)
+    de = derive.escape_time_estimate(rebuilt, rows) if kind == "escape" else \
+        derive.linear_estimate(rebuilt, rows, offset)
+    return Estimate(de, False, rebuilt)
