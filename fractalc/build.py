@@ -23,7 +23,7 @@ import tempfile
 import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass
-from functools import cached_property, lru_cache
+from functools import lru_cache
 
 from .lanes import LaneChoice, cache_dir, choose
 from .errors import RenderError
@@ -159,7 +159,7 @@ class Device:
     queue: object
     info: DeviceInfo
 
-    @cached_property
+    @property
     def lane_choice(self) -> LaneChoice:
         return choose(self.info)
 

@@ -19,6 +19,7 @@ import subprocess
 import sys
 import tempfile
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Callable
 
@@ -190,12 +191,14 @@ def cache_dir() -> Path:
     return Path(base) / "fractalc"
 
 
+@lru_cache(maxsize=1)
 def _probe_version() -> str:
     root = resource_dir("stdlib_cl")
     text = (root / "prelude.cl").read_text() + (root / "probe.cl").read_text()
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+@lru_cache(maxsize=1)
 def _host_cpu() -> str:
     """The CPU's model and feature flags: a driver may name different CPUs
     alike (PoCL: "pthread-AMD EPYC" on Zen 3 and on Zen 4, AVX-512 or not)."""
@@ -244,6 +247,9 @@ def _write_cache(path: Path, entries: dict) -> None:
         pass
 
 
+_chosen: dict = {}     # (cache file, device key) -> the choice made in this process
+
+
 def choose(info, override: int | None = None, probe: Callable[..., str | None] = run_probe,
            refresh: bool = False) -> LaneChoice:
     """The lanes for device `info` (a build.DeviceInfo): `override`, else
@@ -257,9 +263,13 @@ def choose(info, override: int | None = None, probe: Callable[..., str | None] =
         return LaneChoice(1, "one ray per work-item on a GPU")
     path = cache_dir() / "lanes.json"
     key = device_key(info)
+    if not refresh and (path, key) in _chosen:
+        return _chosen[path, key]
     entry = None if refresh else _read_cache(path).get(key)
     if entry and entry.get("lanes") in WIDTHS:
-        return LaneChoice(entry["lanes"], "probed (cached)", tuple((w, why) for w, why in entry.get("failures", [])))
+        choice = LaneChoice(entry["lanes"], "probed (cached)", tuple((w, why) for w, why in entry.get("failures", [])))
+        _chosen[path, key] = choice
+        return choice
     failures = []
     for width in WIDTHS:
         why = probe(info.index, width, ("float", "double") if info.double else ("float",))
@@ -275,15 +285,8 @@ def choose(info, override: int | None = None, probe: Callable[..., str | None] =
     entries = _read_cache(path)
     entries[key] = {"lanes": width, "failures": failures}
     _write_cache(path, entries)
-    return LaneChoice(width, "probed", tuple(failures))
-
-
-def forget(info) -> None:
-    """Drop the cached choice for `info` (it is probed again on next use)."""
-    path = cache_dir() / "lanes.json"
-    entries = _read_cache(path)
-    if entries.pop(device_key(info), None) is not None:
-        _write_cache(path, entries)
+    _chosen[path, key] = LaneChoice(width, "probed", tuple(failures))
+    return _chosen[path, key]
 
 
 def describe(choice: LaneChoice) -> str:

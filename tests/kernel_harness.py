@@ -2,6 +2,8 @@
 generated function) and evaluated at points on the OpenCL device."""
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from fractalc.emit import double_literals, function_source
@@ -15,6 +17,13 @@ __kernel void run(__global const scalar *x, __global const scalar *y, __global c
 """
 
 
+@lru_cache(maxsize=None)
+def _built(source: str):
+    import pyopencl as cl
+    import fractalc
+    return cl.Program(fractalc.loads("scene sphere(1)").device.context, source).build()
+
+
 def evaluate_in_kernel(expression, points, precision: str, lanes: int, params=(0.0,)) -> np.ndarray:
     """`expression` (IR of the point) at (N, 3) `points`, N a multiple of `lanes`."""
     import pyopencl as cl
@@ -26,7 +35,7 @@ def evaluate_in_kernel(expression, points, precision: str, lanes: int, params=(0
     if precision == "double":
         source = double_literals(source)
     device = fractalc.loads("scene sphere(1)").device
-    program = cl.Program(device.context, source).build()
+    program = _built(source)
     dtype = np.float64 if precision == "double" else np.float32
     flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
     buffers = [cl.Buffer(device.context, flags, hostbuf=np.ascontiguousarray(points[:, k], dtype=dtype))
