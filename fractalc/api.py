@@ -17,7 +17,7 @@ import numpy as np
 from . import __version__, run
 from .build import build, open_device
 from .check import FLOAT_MAX, RENDER_KEYS, check, check_param_values, check_value, in_float_range
-from .emit import Target, emit
+from .emit import Target, emit, uniform_source
 from .errors import RenderError, SceneError, diagnostic
 from .lanes import CHOICES as LANE_CHOICES
 from .lower import lower
@@ -159,6 +159,19 @@ class Scene:
         return settings
 
     # ---- running -----------------------------------------------------------
+
+    def bound(self) -> tuple[np.ndarray, float] | None:
+        """The centre and radius of a sphere holding the whole scene (for
+        the current params), or None for an unbounded scene (a ground
+        plane, repetition, a warp)."""
+        scene_ir = lower(self.checked)
+        if scene_ir.bound is None or scene_ir.bound.sphere is None:
+            return None
+        centre, radius = scene_ir.bound.sphere
+        double = self.precision == "double"
+        program = build(uniform_source((*centre, radius), double), self.device, kernels=("uniform_values",))
+        values = run.uniform_values(program, self.device, self._param_values(), 4, double)
+        return values[:3], float(values[3])
 
     def distance(self, points) -> np.ndarray:
         """Distance estimates at (N, 3) points, computed by the compiled kernel."""

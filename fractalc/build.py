@@ -202,30 +202,34 @@ def source_hash(source: str, options: tuple[str, ...] = ()) -> str:
     return hashlib.sha256("\0".join((source,) + options).encode()).hexdigest()
 
 
-def build(source: str, device: Device, options: tuple[str, ...] = (), use_cache: bool = True):
+RENDER_KERNELS = ("render", "distance_at_points")
+
+
+def build(source: str, device: Device, options: tuple[str, ...] = (), use_cache: bool = True,
+          kernels: tuple[str, ...] = RENDER_KERNELS):
     """Build `source` for `device`; reuse a program built before. A cached
-    driver binary that lacks the kernels (left half-built by a crash) is
+    driver binary that lacks the `kernels` (left half-built by a crash) is
     cleared and built again."""
     key = f"{source_hash(source, options)}:{device.info.platform}:{device.info.name}:{device.info.driver}"
     if use_cache and key in _programs:
         return _programs[key]
     _mark_building()
     program = _compile(source, device, options)
-    if not _has_kernels(program):
+    if not _has_kernels(program, kernels):
         shutil.rmtree(driver_cache_dir(), ignore_errors=True)
         # a new option is a new cache key for the driver and pyopencl alike
         program = _compile(source, device, options + ("-D FRACTALC_REBUILT=1",))
-        if not _has_kernels(program):
+        if not _has_kernels(program, kernels):
             _build_failed(source, "the built program has no kernels (a driver cache problem?)")
     statistics.builds += 1
     _programs[key] = program
     return program
 
 
-def _has_kernels(program) -> bool:
+def _has_kernels(program, kernels: tuple[str, ...]) -> bool:
     cl = _cl()
     try:
-        return {"render", "distance_at_points"} <= {k.function_name for k in program.all_kernels()}
+        return set(kernels) <= {k.function_name for k in program.all_kernels()}
     except cl.Error:
         return False
 

@@ -116,9 +116,19 @@ def command_compile(args) -> int:
 
 
 def command_check(args) -> int:
-    from .check import check
-    from .parse import parse
-    check(parse(_require_file(args.scene), args.scene))
+    if not args.de:
+        from .check import check
+        from .parse import parse
+        check(parse(_require_file(args.scene), args.scene))
+        return 0
+    from .overstep import measure
+    _require_positive(("--rays", args.rays))
+    scene = _load(args)
+    try:
+        result = measure(scene, rays=args.rays, seed=args.seed)
+    except ValueError as error:
+        raise UsageError(f"--de: {error}") from None
+    print(f"{args.scene}: {result.report()}")
     return 0
 
 
@@ -298,8 +308,16 @@ def _parser() -> argparse.ArgumentParser:
     compile_.set_defaults(run=command_compile)
 
     check_ = commands.add_parser("check", help="parse and type-check a scene",
-                                 description="Parse and check a scene; print every error.")
+                                 description="Parse and check a scene; print every error. With --de: "
+                                             "also measure how far its distance estimate can overstep "
+                                             "(estimate / distance to the surface along seeded rays) and "
+                                             "the step factor that is safe.")
     check_.add_argument("scene")
+    check_.add_argument("--de", action="store_true",
+                        help="measure the distance estimate against the surface found by fine marching")
+    check_.add_argument("--rays", type=int, default=400, help="with --de: seeded rays (default 400)")
+    check_.add_argument("--seed", type=int, default=0, help="with --de: the rays' seed")
+    device_options(check_)
     check_.set_defaults(run=command_check)
 
     bench_ = commands.add_parser("bench", help="measure frame times along a camera orbit",

@@ -594,6 +594,22 @@ def _comment_text(text: str) -> str:
                    else f"\\U{ord(c):08x}" for c in text)
 
 
+def uniform_source(values: tuple[ir.Expr, ...], double: bool) -> str:
+    """A program whose kernel `uniform_values(params, out)` writes the
+    values of point-independent expressions (a scene's bound, which may
+    call library functions) into `out`, one work-item."""
+    lib = library()
+    writer = _FunctionWriter(ir.Vec(tuple(values)))
+    writer.block(writer.root, "    ")
+    stores = [f"    out[{i}] = (scalar){writer.argument(v)};" for i, v in enumerate(values)]
+    source = "\n\n".join([
+        f"#define LANES 1\n#define PRECISION_DOUBLE {int(double)}\n#define FAST_MATH 0", lib.prelude,
+        _library_text(lib.closure(sorted({name for v in values for name in _calls(v)}))),
+        "\n".join(["__kernel void uniform_values(__constant scalar *params, __global scalar *out) {",
+                   *writer.lines, *stores, "}"])])
+    return double_literals(source) if double else source
+
+
 def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
     """The complete OpenCL program for a lowered scene."""
     lib = library()

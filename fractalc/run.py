@@ -176,3 +176,15 @@ def terminal_progress(total_pixels: int):
     from tqdm import tqdm
     return tqdm(total=total_pixels, unit="px", unit_scale=True, delay=1.0, leave=False,
                 disable=not sys.stderr.isatty(), desc="rendering")
+
+
+def uniform_values(program, device: Device, params, count: int, double: bool) -> np.ndarray:
+    """The `count` values the program's `uniform_values` kernel writes
+    (emit.uniform_source)."""
+    import pyopencl as cl
+    result = np.empty(count, dtype=_scalar(double))
+    with _guard("evaluating the scene's bound"):
+        out = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY, result.nbytes)
+        cl.Kernel(program, "uniform_values")(device.queue, (1,), None, _constant_buffer(device, params, double), out)
+        cl.enqueue_copy(device.queue, result, out)
+    return result.astype(np.float64)

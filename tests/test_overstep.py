@@ -1,0 +1,74 @@
+"""`fractalc check --de` (fractalc/overstep.py): the estimate against the
+surface found by fine marching and bisection along seeded rays."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import fractalc
+from fractalc import cli, overstep
+
+
+@pytest.mark.parametrize("text", ["scene sphere(1)", "scene box((1, 2, 0.5)).round(0.1)",
+                                  "scene sphere(1) | box(0.8).translate((1, 0, 0))",
+                                  "scene menger(3)", "scene sierpinski(4)"])
+def test_exact_distances_never_overstep(text):
+    result = overstep.measure(fractalc.loads(text), rays=150)
+    assert result.rays >= 50 and result.samples > 10_000
+    assert 0.9 < result.largest_ratio <= 1.001 and result.safe_step_factor == 1.0
+
+
+def test_an_estimate_twice_too_long_is_caught_with_its_safe_factor():
+    """The field of a sphere, doubled: the measure must find the factor 2."""
+    scene = fractalc.loads("scene sphere(2).scale(0.5)")
+    honest = overstep.measure(scene, rays=100)
+    assert honest.largest_ratio <= 1.001
+    doubled = _Doubled(scene)
+    result = overstep.measure(doubled, rays=100)
+    assert 1.99 < result.largest_ratio < 2.01 and abs(result.safe_step_factor - 0.5) < 0.01
+
+
+class _Doubled:
+    """A scene whose estimate is twice its true one."""
+
+    def __init__(self, scene):
+        self.scene = scene
+        self.device, self.precision, self.checked = scene.device, "double", scene.checked
+        self.params, self.device_spec, self.lanes = scene.params, scene.device_spec, scene.lanes
+
+    def bound(self):
+        return self.scene.bound()
+
+    def distance(self, points):
+        return 2.0 * self.scene.distance(points)
+
+
+def test_the_mandelbulbs_estimate_oversteps_near_its_surface():
+    """The contract's scalar-dr estimate is not a bound everywhere (Syntopia,
+    part V): the measure says so, and by how much."""
+    result = overstep.measure(fractalc.loads("scene mandelbulb()"), rays=200)
+    assert result.largest_ratio > 1.2 and result.safe_step_factor < 0.85
+    assert result.p99_ratio < 1.0
+
+
+def test_the_measure_is_deterministic_for_a_seed():
+    scene = fractalc.loads("scene julia()")
+    a, b = overstep.measure(scene, rays=80, seed=3), overstep.measure(scene, rays=80, seed=3)
+    assert a == b and overstep.measure(scene, rays=80, seed=4) != a
+
+
+def test_the_command_reports_it_and_refuses_unbounded_scenes(tmp_path, capsys):
+    (tmp_path / "bulb.frac").write_text("scene mandelbulb()\n")
+    (tmp_path / "floor.frac").write_text("scene plane()\n")
+    assert cli.main(["check", "--de", "--rays", "100", str(tmp_path / "bulb.frac")]) == 0
+    out = capsys.readouterr().out
+    assert "100 rays met the surface" in out and "largest estimate / distance" in out
+    assert cli.main(["check", "--de", str(tmp_path / "floor.frac")]) == 2
+    assert "--de: the scene has no finite bound" in capsys.readouterr().err
+    assert cli.main(["check", "--de", "--rays", "0", str(tmp_path / "bulb.frac")]) == 2
+
+
+def test_the_scene_bound_is_computed_on_the_device():
+    centre, radius = fractalc.loads("param r = 1.5 in [1, 2]\nscene sphere(r).translate((1, 2, 3))").bound()
+    assert np.allclose(centre, (1, 2, 3)) and abs(radius - 1.5) < 1e-6
+    assert fractalc.loads("scene plane()").bound() is None
