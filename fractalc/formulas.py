@@ -128,20 +128,24 @@ def translate(z: Vector, offset: Vector) -> Block:
     return Block(tuple(ir.add(c, o) for c, o in zip(z, offset)), _c(1.0))
 
 
-def triplex_power(z: Vector, power: ir.Expr) -> Block:
-    """White and Nylander's z^n in spherical coordinates (theta from the z
-    axis, 0 at r = 0), with the Mandelbulb's standard scalar rule
-    n r^(n-1) as its approximate factor."""
-    r = ir.length(z)
+def triplex_direction(z: Vector, r: ir.Expr, power: ir.Expr) -> Vector:
+    """The direction of the triplex power z^power: z's spherical angles
+    (theta from the z axis, 0 at r = 0; phi about it) times the power."""
     polar = ir.op("acos", ir.op("clamp", ir.div(z[2], r), _c(-1.0), _c(1.0)))
     theta = ir.mul(ir.op("select", ir.op("eq", r, _c(0.0)), _c(0.0), polar), power)
     phi = ir.mul(ir.op("atan2", z[1], z[0]), power)
-    log_r = ir.op("log", r)
-    r_power = ir.op("exp", ir.mul(power, log_r))
     sin_theta = ir.op("sin", theta)
-    direction = (ir.mul(sin_theta, ir.op("cos", phi)), ir.mul(ir.op("sin", phi), sin_theta), ir.op("cos", theta))
+    return ir.mul(sin_theta, ir.op("cos", phi)), ir.mul(ir.op("sin", phi), sin_theta), ir.op("cos", theta)
+
+
+def triplex_power(z: Vector, power: ir.Expr) -> Block:
+    """White and Nylander's z^n, r^n times `triplex_direction`, with the
+    Mandelbulb's standard scalar rule n r^(n-1) as its approximate factor."""
+    r = ir.length(z)
+    log_r = ir.op("log", r)
     factor = ir.mul(power, ir.op("exp", ir.mul(ir.sub(power, _c(1.0)), log_r)))
-    return Block(_scaled(direction, r_power), factor, approximate=True)
+    return Block(_scaled(triplex_direction(z, r, power), ir.op("exp", ir.mul(power, log_r))), factor,
+                 approximate=True)
 
 
 def quaternion_square(q: Vector) -> Block:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from . import ir
+from .formulas import quaternion_square, triplex_direction
 
 Vector = tuple[ir.Expr, ...]
 TRAP_START = 1e30           # a trap distance no orbit point is farther than
@@ -68,16 +69,6 @@ def _clamped(p: Vector) -> Vector:
 MANDELBULB = "power: num = 8 1..32, iterations: int = 12 1..1000, bailout: num = 2 >0"
 
 
-def _mandelbulb_direction(z: Vector, r: ir.Expr, power: ir.Expr) -> Vector:
-    """The direction of the triplex power z^power: the spherical angles of z
-    (theta from the z axis, 0 at r = 0; phi about it) times the power."""
-    polar = ir.op("acos", ir.op("clamp", ir.div(z[2], r), _c(-1.0), _c(1.0)))
-    theta = ir.mul(ir.op("select", ir.op("eq", r, _c(0.0)), _c(0.0), polar), power)
-    phi = ir.mul(ir.op("atan2", z[1], z[0]), power)
-    sin_theta = ir.op("sin", theta)
-    return (ir.mul(sin_theta, ir.op("cos", phi)), ir.mul(ir.op("sin", phi), sin_theta), ir.op("cos", theta))
-
-
 def _mandelbulb_power8(z: Vector) -> Vector:
     """z^8 without trigonometry, after Quilez ("Mandelbulb", 2009), with his
     polar axis y turned to our z: r^8 times the direction at power 8 (to
@@ -124,7 +115,7 @@ def mandelbulb(p: Vector, power: ir.Expr, iterations: ir.Expr, bailout: ir.Expr,
             lambda: (*_mandelbulb_power8(z), ir.mul(ir.mul(ir.mul(r2, r2), r2), r)),
             # r^power as exp(power ln r): pow costs ~10x exp + log on vector
             # lanes (PoCL); 0^0 = 1 at power 1
-            lambda: (*_scale(_mandelbulb_direction(z, r, power), ir.op("exp", ir.mul(power, ir.op("log", r)))),
+            lambda: (*_scale(triplex_direction(z, r, power), ir.op("exp", ir.mul(power, ir.op("log", r)))),
                      ir.op("select", ir.op("eq", power, _c(1.0)), _c(1.0),
                            ir.op("exp", ir.mul(ir.sub(power, _c(1.0)), ir.op("log", r))))))
         r_power = ir.mul(r_power1, r)
@@ -135,7 +126,7 @@ def mandelbulb(p: Vector, power: ir.Expr, iterations: ir.Expr, bailout: ir.Expr,
         def rescaled():
             log_power = ir.mul(power, ir.op("log", r))
             inverse = ir.op("exp", ir.neg(log_power))
-            direction = _mandelbulb_direction(z, r, power)
+            direction = triplex_direction(z, r, power)
             return (*_add(direction, _scale(p, inverse)), ir.add(ir.div(ir.mul(power, dr), r), inverse), log_power)
 
         *z_new, dr_new, log_new = ir.branch(escapes, rescaled, (*z_next, dr_next, log_scale))
@@ -171,9 +162,7 @@ def julia(p: Vector, c: ir.Vec, slice_: ir.Expr, iterations: ir.Expr, bailout: i
         q, dr, log_scale, trap = state[:4], state[4], state[5], state[7:]
         r2 = squared(state)
         r = ir.op("sqrt", r2)
-        x, y, z, w = q
-        # q^2 = (x^2 - |v|^2, 2 x v) for q = (x, v)
-        square = (ir.sub(ir.mul(x, x), ir.dot(q[1:], q[1:])), *(ir.mul(ir.mul(_c(2.0), x), v) for v in q[1:]))
+        square = quaternion_square(q).z
         escapes = ir.op("lt", _c(1e12), r2)
         scale, log_new = ir.branch(escapes, lambda: (ir.div(_c(1.0), r2), ir.op("log", r2)), (_c(1.0), log_scale))
         q_new = tuple(ir.mul(ir.add(s, k), scale) for s, k in zip(square, c.items))
