@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import time
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
@@ -22,33 +23,42 @@ from .errors import RenderError, SceneError, diagnostic
 from .lanes import CHOICES as LANE_CHOICES
 from .lower import lower
 from .parse import parse
+from .passes import PASSES, channels
 from .program import Camera, CheckedScene, RenderSettings
 from .source import read_scene_file
 from .write import write
 
 PRECISIONS = ("float", "double")
 _RUNTIME_KEYS = {"width", "height", "samples"}   # change without rebuilding
+SCENE_TEXT_LIMIT = 64 * 1024   # longer scene text is left out of the metadata (its sha256 and path stay)
 
 
 @dataclass(frozen=True)
 class Image:
-    """A rendered image: linear colour and the AOVs of the pixel-centre rays."""
-    rgba: np.ndarray        # (H, W, 4) float32, linear
+    """A rendered image: linear colour, coverage alpha and the AOVs of the
+    pixel-centre rays (docs/compositing.md)."""
+    rgba: np.ndarray        # (H, W, 4) float32, linear; A: the coverage by hits
     depth: np.ndarray       # (H, W) ray distance, +inf where the ray missed
     normal: np.ndarray      # (H, W, 3) world-space normal (0 on misses)
     steps: np.ndarray       # (H, W) march steps
     metadata: dict = field(default_factory=dict)
+    passes: dict = field(default_factory=dict)   # pass name (passes.PASSES) -> (H, W, channels) array
 
     def planes(self) -> dict[str, np.ndarray]:
+        """Channel name -> (H, W) array, in the EXR's channel order."""
         planes = {c: self.rgba[..., i] for i, c in enumerate("RGBA")}
         planes["Z"] = self.depth
         planes.update({f"N.{c}": self.normal[..., i] for i, c in enumerate("xyz")})
         planes["steps"] = self.steps
+        for name, names in PASSES.items():
+            if name in self.passes:
+                planes.update({c: self.passes[name][..., i] for i, c in enumerate(names)})
         return planes
 
-    def save(self, path: str) -> None:
-        """Write EXR (linear, all channels, metadata) or PNG (sRGB 8-bit)."""
-        write(path, self.planes(), self.metadata)
+    def save(self, path: str, half: bool = False, compression: str = "zip", bits: int = 8) -> None:
+        """Write EXR (linear, all channels, camera matrices, metadata; `half`
+        floats, `compression`) or PNG (sRGB, `bits` 8 or 16, straight alpha)."""
+        write(path, self.planes(), self.metadata, half=half, compression=compression, bits=bits)
 
 
 class Scene:
@@ -155,6 +165,12 @@ class Scene:
                 raise ValueError(f"unknown render setting '{key}' (known: {', '.join(sorted(names))})")
             if value is None:
                 continue
+            if key == "aovs":    # not a file's key: passes to add to the default channels
+                if isinstance(value, str):
+                    raise ValueError(f"aovs must be a list of pass names, not the string {value!r}")
+                channels(value)     # raises ValueError naming an unknown pass
+                settings = replace(settings, aovs=tuple(p for p in PASSES if p in value))
+                continue
             settings = replace(settings, **{key: check_value(RENDER_KEYS[key], key, value)})
         return settings
 
@@ -183,28 +199,37 @@ class Scene:
                **render_keys) -> Image:
         """Render with the file's settings, overridden by keyword (any render
         key: width=, height=, samples=, ao=, max_steps=, ...); `camera`
-        replaces the file's camera (no rebuild)."""
+        replaces the file's camera (no rebuild); `aovs` names the passes
+        to add to the default channels (passes.PASSES: P, diffuse, ...)."""
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2 ** 32:
             raise ValueError(f"seed must be a whole number from 0 to {2 ** 32 - 1}, not {seed!r}")
         settings = self._settings(render_keys)
+        names = channels(settings.aovs)
         camera = camera or self.checked.camera
         program, target = self._program(settings, camera)
         frame = run.Frame(settings.width, settings.height, settings.samples, seed,
                           run.camera_block(camera))
         bar = run.terminal_progress(settings.width * settings.height) if progress else None
+        start = time.perf_counter()
         try:
             pixels = run.render(program, self.device, frame, self._param_values(), target.lanes,
-                                target.double, bar.update if bar else None)
+                                target.double, bar.update if bar else None, names)
         except MemoryError:   # the host's image array: a runtime failure, in one line
             raise RenderError(f"out of memory for a {settings.width}x{settings.height} image") from None
         finally:
             if bar:
                 bar.close()
+        seconds = time.perf_counter() - start
         # views of the kernel's pixels: no copies
+        passes, first = {}, len(run.CHANNELS)
+        for name in settings.aovs:
+            count = len(PASSES[name])
+            passes[name] = pixels[..., first:first + count]
+            first += count
         return Image(pixels[..., 0:4], pixels[..., 4], pixels[..., 5:8], pixels[..., 8],
-                     self._metadata(settings, camera))
+                     self._metadata(settings, camera, seconds), passes)
 
-    def _metadata(self, settings: RenderSettings, camera: Camera) -> dict[str, str]:
+    def _metadata(self, settings: RenderSettings, camera: Camera, seconds: float) -> dict[str, str]:
         vector = lambda v: " ".join(f"{x:g}" for x in v)  # noqa: E731
         metadata = {
             "version": __version__,
@@ -215,10 +240,21 @@ class Scene:
             "params": " ".join(f"{k}={v:g}" for k, v in self.params.items()),
             "precision": settings.precision,
             "device": self.device.info.name,
+            "render_seconds": f"{seconds:.3f}",
+            "rendered_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            # OpenEXR's standard camera attributes (write.MATRICES), row-major
+            "worldToCamera": " ".join(f"{x:.9g}" for x in run.world_to_camera(camera).flat),
+            "worldToNDC": " ".join(f"{x:.9g}" for x in
+                                   run.world_to_ndc(camera, settings.width, settings.height).flat),
         }
+        if len(self.checked.source.encode()) <= SCENE_TEXT_LIMIT:
+            metadata["scene_text"] = self.checked.source
         for f in fields(RenderSettings):
             value = getattr(settings, f.name)
-            metadata[f"render.{f.name}"] = vector(value) if isinstance(value, tuple) else str(value)
+            if f.name == "aovs":
+                metadata["render.aovs"] = " ".join(value)
+            else:
+                metadata[f"render.{f.name}"] = vector(value) if isinstance(value, tuple) else str(value)
         return metadata
 
 

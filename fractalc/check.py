@@ -579,13 +579,14 @@ class _Checker:
         value = self._evaluate(entry.value)
         if param.type.startswith("word:"):
             choices = param.type[5:].split("|")
-            numeric = "num" in choices
+            other = _word_alternative(choices)     # a number or a vector where no word is given
             if value.type == WORD and value.data in choices:
                 return value.data
-            if not (numeric and value.type == NUM):
-                listed = " or ".join(f"'{c}'" if c != "num" else "a number" for c in choices)
+            if not (other and value.type == _WORD_ALTERNATIVES[other]):
+                listed = " or ".join(f"'{c}'" if c not in _WORD_ALTERNATIVES
+                                     else _TYPE_WORDS[_WORD_ALTERNATIVES[c]] for c in choices)
                 self.fail(entry.value.span, f"'{entry.key}' must be {listed}")
-            param = _P(param.name, "num", None, *param.constraints)
+            param = _P(param.name, other, None, *param.constraints)
         data = self.convert(entry.value.span, value, param, owner)
         if owner == "material":
             return data
@@ -720,6 +721,14 @@ def _vector_math(name: str, vectors: list[ir.Vec]) -> Value:
                                 ir.sub(ir.mul(a[0], b[1]), ir.mul(a[1], b[0]))))
 
 
+_WORD_ALTERNATIVES = {"num": NUM, "vec3": "vec3"}   # parameter type: its values' type
+
+
+def _word_alternative(choices) -> str | None:
+    """The type a `word:...|num` or `word:...|vec3` key takes besides its words."""
+    return next((c for c in choices if c in _WORD_ALTERNATIVES), None)
+
+
 def _keys(*params: Parameter) -> dict[str, Parameter]:
     return {p.name: p for p in params}
 
@@ -748,7 +757,7 @@ RENDER_KEYS = _keys(
     _P("width", "int", None, ">=1", "<=65536"), _P("height", "int", None, ">=1", "<=65536"),
     _P("max_steps", "int", None, "1..100000"), _P("max_distance", "num", None, ">0"),
     _P("epsilon", "word:pixel|num", None, ">0"), _P("ao", "num", None, "0..1"),
-    _P("samples", "int", None, ">=1", "<=4096"), _P("background", "vec3", None, ">=0"),
+    _P("samples", "int", None, ">=1", "<=4096"), _P("background", "word:transparent|vec3", None, ">=0"),
     _P("precision", "word:float|double"), _P("reflections", "int", None, "0..16"),
     _P("glow", "block:glow"), _P("fog", "block:fog"), _P("slice", "block:slice"),
     _P("ao_method", "word:normal|steps"), _P("dither", "num", None, "0..1"),
@@ -780,20 +789,21 @@ def check_value(param: Parameter, key: str, value):
     choices = param.type[5:].split("|") if param.type.startswith("word:") else ()
     if value in choices:
         return value
-    if choices and "num" not in choices:
+    other = _word_alternative(choices) if choices else param.type
+    if other is None:
         raise ValueError(f"'{key}' must be {' or '.join(repr(c) for c in choices)}, not {value!r}")
-    is_vector = param.type == "vec3"
+    is_vector = other == "vec3"
     try:
         items = tuple(float(x) for x in value) if is_vector else (float(value),)
     except (TypeError, ValueError):
-        raise ValueError(f"'{key}' must be {_TYPE_WORDS[param.type if is_vector else NUM]}, "
+        raise ValueError(f"'{key}' must be {_TYPE_WORDS['vec3' if is_vector else NUM]}, "
                          f"not {value!r}") from None
     if is_vector and len(items) != 3:
         raise ValueError(f"'{key}' must have 3 components, not {len(items)}")
     if not all(in_float_range(x) for x in items):
         raise ValueError(f"'{key}' must be finite (within ±{FLOAT_MAX:.3g}), not {value!r}")
     data = ir.Vec(tuple(ir.const(x) for x in items)) if is_vector else ir.const(items[0])
-    numeric = param if not choices else _P(param.name, "num", None, *param.constraints)
+    numeric = param if not choices else _P(param.name, other, None, *param.constraints)
     try:
         checker.check_constraints(Span(1, 1, 1, 2), data, numeric, "render")
     except _Failed:

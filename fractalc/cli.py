@@ -16,7 +16,8 @@ import time
 from contextlib import contextmanager
 
 from .errors import NoSceneFile, RenderError, SceneError
-from .write import output_problem, replacing
+from .passes import PASSES
+from .write import COMPRESSIONS, output_problem, replacing
 
 IMAGE_EXTENSIONS = (".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff")
 
@@ -65,6 +66,16 @@ def _require_file(path: str) -> str:
         raise UsageError(str(error)) from None
 
 
+def _passes(text: str) -> list[str]:
+    """--aov's value: pass names, comma-separated."""
+    names = [name.strip() for name in text.split(",") if name.strip()]
+    unknown = [name for name in names if name not in PASSES]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"unknown pass '{unknown[0] if unknown else text}' "
+                                         f"(known: {', '.join(PASSES)})")
+    return names
+
+
 def _load(args):
     from .api import loads
     text = _require_file(args.scene)
@@ -92,15 +103,21 @@ def _require_writable(*options, folders_made: bool = False) -> None:
 def command_render(args) -> int:
     if not args.output.lower().endswith(IMAGE_EXTENSIONS):
         raise UsageError(f"-o {args.output}: the output must end in one of {', '.join(IMAGE_EXTENSIONS)}")
+    exr = args.output.lower().endswith(".exr")
+    for option, given in (("--half", args.half), ("--compression", args.compression)):
+        if given and not exr:
+            raise UsageError(f"{option} is for EXR output, not {args.output}")
+    if args.bits != 8 and exr:
+        raise UsageError(f"--bits is for PNG (and other integer) output, not {args.output}")
     _require_writable(("-o", args.output, args.output))
     scene = _load(args)
-    overrides = {"width": args.width, "height": args.height, "samples": args.samples}
+    overrides = {"width": args.width, "height": args.height, "samples": args.samples, "aovs": args.aov}
     try:
         start = time.perf_counter()
         image = scene.render(seed=args.seed, progress=not args.quiet, **overrides)
     except ValueError as error:
         raise UsageError(str(error)) from None
-    image.save(args.output)
+    image.save(args.output, half=args.half, compression=args.compression or "zip", bits=args.bits)
     if not args.quiet:
         height, width = image.depth.shape
         print(f"wrote {args.output} ({width}x{height}, {time.perf_counter() - start:.2f} s)",
@@ -248,7 +265,7 @@ def command_animate(args) -> int:
     scene = _load(args)
     if scene.checked.path is None:
         raise UsageError(f"{args.scene} has no 'path' to animate (see docs/animation.md)")
-    overrides = {"width": args.width, "height": args.height, "samples": args.samples}
+    overrides = {"width": args.width, "height": args.height, "samples": args.samples, "aovs": args.aov}
     start = time.perf_counter()
     try:
         files, rendered = render_frames(scene, args.output, args.fps, seed=args.seed, overwrite=args.overwrite,
@@ -289,6 +306,9 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--samples", type=int, help="anti-aliasing samples per pixel")
         p.add_argument("--seed", type=_seed, default=0, help="jitter seed for samples > 1")
         p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+        p.add_argument("--aov", type=_passes, action="extend", metavar="PASS[,PASS...]",
+                       help=f"add passes to the EXR (repeatable): {', '.join(PASSES)} "
+                            "(see docs/compositing.md)")
         device_options(p)
 
     render = commands.add_parser("render", help="render a scene to EXR or PNG",
@@ -296,6 +316,9 @@ def _parser() -> argparse.ArgumentParser:
                                              "steps; PNG: sRGB 8-bit.")
     render.add_argument("scene")
     render.add_argument("-o", "--output", required=True, help="output image (.exr, .png, ...)")
+    render.add_argument("--half", action="store_true", help="EXR: half-float channels (Z and P stay float)")
+    render.add_argument("--compression", choices=COMPRESSIONS, help="EXR compression (default zip)")
+    render.add_argument("--bits", type=int, choices=(8, 16), default=8, help="PNG: bits per channel (default 8)")
     image_options(render)
     render.set_defaults(run=command_render)
 

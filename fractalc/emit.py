@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 from . import __version__, ir
 from .lower import POINT, SceneIR
+from .passes import PASSES, channels
 from .program import Light
 from .stdlib import library
 
@@ -360,7 +361,7 @@ def _bound_function(scene_ir: SceneIR, with_half_spaces: bool) -> str:
     return "\n".join(lines)
 
 
-def _light_block(index: int, light: Light, bound, transparent: bool) -> tuple[str, set[str]]:
+def _light_block(index: int, light: Light, bound, transparent: bool, passes: bool) -> tuple[str, set[str]]:
     radiance = _vector(tuple(min(c * light.intensity, MAX_RADIANCE) for c in light.color))
     lines = [f"    {{   // light {index}: {light.kind}, shadows {light.shadows}"]
     if light.kind == "directional":
@@ -397,50 +398,87 @@ def _light_block(index: int, light: Light, bound, transparent: bool) -> tuple[st
     if light.shadows == "hard":
         # through transparent solids where the scene has some
         function = "hard_shadow_through" if transparent else "hard_shadow"
-        lines.append(f"        radiance = v3_scale(radiance, {function}(lifted, to_light, reach, threshold, "
-                     "facing, params));")
+        lines.append(f"        real visible = {function}(lifted, to_light, reach, threshold, facing, params);")
         needs.add(function)
     elif light.shadows == "soft":
-        lines.append(f"        radiance = v3_scale(radiance, soft_shadow(lifted, to_light, reach, threshold, "
-                     f"{literal(light.softness)}, facing, params));")
+        lines.append(f"        real visible = soft_shadow(lifted, to_light, reach, threshold, "
+                     f"{literal(light.softness)}, facing, params);")
         needs.add("soft_shadow")
-    lines += ["        color = v3_add(color, blinn_phong(normal, to_light, to_eye, albedo, s.specular, "
-              "s.shininess, radiance));", "    }"]
+    if light.shadows != "none":
+        lines.append("        radiance = v3_scale(radiance, visible);")
+    lines += _lit_lines("to_light", "radiance", passes, "        ")
+    if passes and light.shadows != "none":
+        lines.append("        passes->shadow = passes->shadow + (1.0f - visible);")
+    lines.append("    }")
     return "\n".join(lines), needs
+
+
+def _lit_lines(to_light: str, radiance: str, passes: bool, indent: str) -> list[str]:
+    """Add a light's Blinn-Phong term to `color`; with the shading passes,
+    its highlight (the term without albedo) to the specular pass and the
+    rest to the diffuse pass."""
+    def term(albedo):
+        return f"blinn_phong(normal, {to_light}, to_eye, {albedo}, s.specular, s.shininess, {radiance})"
+    if not passes:
+        return [f"{indent}color = v3_add(color, {term('albedo')});"]
+    return [f"{indent}{line}" for line in (
+        f"vec3 lit = {term('albedo')};",
+        f"vec3 highlight = {term('v3((real)0.0f, 0.0f, 0.0f)')};",
+        "passes->specular = v3_add(passes->specular, highlight);",
+        "passes->diffuse = v3_add(passes->diffuse, v3_sub(lit, highlight));",
+        "color = v3_add(color, lit);")]
 
 
 def _shade_function(scene_ir: SceneIR, on: dict[str, bool]) -> tuple[str, list[str]]:
     """Blinn-Phong over every light, with shadows and AO only where asked."""
     scene = scene_ir.scene
     ao = scene.render.ao > 0
+    # the diffuse, specular, shadow and AO passes: `shade_passes` fills them
+    # in, and `shade` is it with the passes thrown away (the compiler drops them)
+    passes = on["SHADING_PASSES"]
     needs = {"blinn_phong"}
-    lines = ["vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, real steps, mask hit,",
-             "           __constant scalar *params) {",
+    signature = "vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, real steps, mask hit,"
+    lines = [signature if not passes else signature.replace("shade(", "shade_passes("),
+             "           __constant scalar *params" + (", shading_passes *passes) {" if passes else ") {"),
              "    surface s = surface_at(p, params);",
              "    vec3 albedo = v3(s.red, s.green, s.blue);",
              "    vec3 to_eye = v3(-dir.x, -dir.y, -dir.z);"]
-    if ao and scene.render.ao_method == "steps":
+    # an AO pass of a scene without AO shows the occlusion at full strength
+    strength = scene.render.ao if ao else 1.0
+    if (ao or on["PASS_AO"]) and scene.render.ao_method == "steps":
         needs.add("step_occlusion")
-        lines.append(f"    real occlusion = step_occlusion(steps, {literal(scene.render.ao)});")
-    elif ao:
+        lines.append(f"    real occlusion = step_occlusion(steps, {literal(strength)});")
+    elif ao or on["PASS_AO"]:
         needs.add("ambient_occlusion")
         lines.append(f"    real occlusion = ambient_occlusion(p, normal, {literal(AO_DELTA)}, "
-                     f"{literal(scene.render.ao)}, params);")
+                     f"{literal(strength)}, params);")
     ambient = f"{literal(AMBIENT)} * occlusion" if ao else literal(AMBIENT)
     lines.append(f"    vec3 color = v3_scale(albedo, {ambient});")
+    if passes:
+        lines += ["    passes->diffuse = color;", "    passes->specular = v3((real)0.0f, 0.0f, 0.0f);",
+                  "    passes->shadow = 0.0f;",
+                  "    passes->occlusion = " + ("occlusion;" if ao or on["PASS_AO"] else "1.0f;")]
     if any(light.shadows != "none" for light in scene.lights):
         lines.append("    vec3 lifted = v3_add(p, v3_scale(normal, 2.0f * threshold));")
         if scene_ir.bound is not None:
             lines += ["    vec3 bound_centre;", "    real bound_radius = scene_bound(params, &bound_centre);"]
     if not scene.lights:
-        lines += ["    // no lights in the scene: a headlight, from the eye along the ray",
-                  "    color = v3_add(color, blinn_phong(normal, to_eye, to_eye, albedo, s.specular, "
-                  "s.shininess, v3(1.0f, 1.0f, 1.0f)));"]
+        lines.append("    // no lights in the scene: a headlight, from the eye along the ray")
+        lines += _lit_lines("to_eye", "v3(1.0f, 1.0f, 1.0f)", passes, "    ")
     for index, light in enumerate(scene.lights):
-        block, light_needs = _light_block(index, light, scene_ir.bound, on["TRANSPARENCY"])
+        block, light_needs = _light_block(index, light, scene_ir.bound, on["TRANSPARENCY"], passes)
         lines.append(block)
         needs |= light_needs
+    if passes and scene.lights:
+        # the fraction of the light the shadows take, averaged over the lights
+        lines.append(f"    passes->shadow = passes->shadow * {literal(1.0 / len(scene.lights))};")
     lines += ["    return color;", "}"]
+    if passes:
+        lines = ["typedef struct {", "    vec3 diffuse, specular;   // diffuse + specular = the shaded colour",
+                 "    real shadow, occlusion;", "} shading_passes;", "", *lines, "",
+                 "vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, real steps, mask hit,",
+                 "           __constant scalar *params) {", "    shading_passes unused;",
+                 "    return shade_passes(p, normal, dir, threshold, steps, hit, params, &unused);", "}"]
     return "\n".join(lines), sorted(needs)
 
 
@@ -464,6 +502,10 @@ def features(scene_ir: SceneIR) -> dict[str, bool]:
         # glow needs every miss's closest approach, so misses must be marched
         "SCENE_BOUND": bounded and not glow,
         "SCENE_HALF_SPACES": bounded and half_spaces and not glow,
+        "TRANSPARENT_BACKGROUND": render.background == "transparent",
+        # the passes asked for beyond the default channels (run.PASSES)
+        **{f"PASS_{name.upper()}": name in render.aovs for name in PASSES},
+        "SHADING_PASSES": bool({"diffuse", "specular", "shadow", "ao"} & set(render.aovs)),
     }
 
 
@@ -537,6 +579,8 @@ def _constants(scene_ir: SceneIR, target: Target, on: dict[str, bool]) -> str:
     def lane_vector(values):
         return "0.0f" if lanes == 1 else f"((real)({', '.join(literal(v) for v in values)}))"
     pixel = render.epsilon == "pixel"
+    background = (0.0, 0.0, 0.0) if render.background == "transparent" else render.background
+    names = channels(render.aovs)
     return "\n".join([
         f"#define LANES {lanes}",
         f"#define PRECISION_DOUBLE {int(target.double)}",
@@ -546,13 +590,20 @@ def _constants(scene_ir: SceneIR, target: Target, on: dict[str, bool]) -> str:
         f"#define HIT_EPSILON {literal(0.0 if pixel else render.epsilon)}",
         f"#define EPSILON_SCALE {literal(render.epsilon_scale)}",
         f"#define FAST_MATH {int(fast_math(render.fast_math, target))}",
-        *(f"#define BACKGROUND_{c} {literal(v)}" for c, v in zip("RGB", render.background)),
+        *(f"#define BACKGROUND_{c} {literal(v)}" for c, v in zip("RGB", background)),
+        f"#define CHANNELS {len(names)}",
+        *(f"#define CHANNEL_{_channel_macro(name)} {i}" for i, name in enumerate(names)),
         f"#define LANES_X {width}",
         f"#define LANES_Y {height}",
         f"#define LANE_X {lane_vector([i % width for i in range(lanes)])}",
         f"#define LANE_Y {lane_vector([i // width for i in range(lanes)])}",
         *_effect_constants(render, on),
     ])
+
+
+def _channel_macro(name: str) -> str:
+    """The C name of a channel's index: N.x -> N_X, diffuse.R -> DIFFUSE_R."""
+    return name.upper().replace(".", "_")
 
 
 _HEADER = """\
@@ -563,9 +614,12 @@ _HEADER = """\
 //   render(__global float *out, __constant {scalar} *params, __constant {scalar} *camera,
 //          int width, int height, int x0, int y0, int pitch, int samples, uint seed)
 //     Renders pixels of a width x height image into `out`, which holds
-//     `rows` rows of `pitch` pixels of 9 floats each: R G B A Z N.x N.y N.z
-//     steps (linear colour; Z = +inf where the ray missed), pixel (x, y) at
-//     (y * pitch + x) * 9. pitch >= width and rows >= height are multiples
+//     `rows` rows of `pitch` pixels of CHANNELS floats each (9 unless passes
+//     were asked for; `#define CHANNELS` below): R G B A Z N.x N.y N.z steps,
+//     then the passes, at the indices of the CHANNEL_ defines (linear colour;
+//     A = the fraction of the pixel's samples that hit; Z = +inf where the
+//     ray missed), pixel (x, y) at (y * pitch + x) * CHANNELS (see
+//     docs/compositing.md). pitch >= width and rows >= height are multiples
 //     of LANES_X and LANES_Y (blocks past the image's edge write there). A
 //     work-item renders a block of LANES_X x LANES_Y pixels ({block}): the
 //     block at (x0 + LANES_X * i, y0 + LANES_Y * j) for global id (i, j).

@@ -160,7 +160,7 @@ class RenderSettings:
     epsilon: float | str = "pixel"   # a number, or "pixel"
     ao: float = 0.0
     samples: int = 1
-    background: Vector3 = (0.05, 0.05, 0.08)
+    background: Vector3 | str = (0.05, 0.05, 0.08)   # or "transparent"
     precision: str = "float"
     reflections: int = 0
     glow: Glow | None = None
@@ -172,6 +172,7 @@ class RenderSettings:
     epsilon_scale: float = 1.0       # multiplies the hit threshold (a quality knob)
     normals: str = "tetrahedral"     # finite differences: tetrahedral (4 evaluations) or central (6)
     fast_math: str = "auto"          # on: native_ transcendental functions; auto: on CPUs
+    aovs: tuple[str, ...] = ()       # passes beyond the default channels (run.PASSES); not a file key
 
 
 @dataclass(frozen=True)

@@ -19,9 +19,10 @@ import numpy as np
 from .build import Device
 from .emit import lane_block
 from .errors import RenderError
+from .passes import DEFAULT_CHANNELS
 from .program import Camera
 
-CHANNELS = ("R", "G", "B", "A", "Z", "N.x", "N.y", "N.z", "steps")   # of a pixel, as in the kernel
+CHANNELS = DEFAULT_CHANNELS   # of a pixel, as in a kernel without extra passes (passes.channels)
 # Tiles: launches of at most this many pixels (GPU watchdogs; progress).
 TILE_WIDTH, TILE_HEIGHT = 1024, 64
 TILES_IN_FLIGHT = 3
@@ -54,6 +55,31 @@ def camera_block(camera: Camera) -> tuple[float, ...]:
                                     camera.aperture, focus))
 
 
+def world_to_camera(camera: Camera) -> np.ndarray:
+    """OpenEXR's `worldToCamera` (row vectors: [x y z 1] @ M): camera space
+    is left-handed, x right, y up, z along the view (positive in front)."""
+    block = camera_block(camera)
+    position, axes = np.array(block[0:3]), np.array([block[6:9], block[9:12], block[3:6]])
+    matrix = np.identity(4)
+    matrix[:3, :3] = axes.T          # column k: the k-th camera axis
+    matrix[3, :3] = -axes @ position
+    return matrix
+
+
+def world_to_ndc(camera: Camera, width: int, height: int) -> np.ndarray:
+    """OpenEXR's `worldToNDC` (row vectors; divide by w, drop z): NDC (0, 0)
+    is the image's top-left corner, (1, 1) its bottom-right, y down. By
+    LANGUAGE.md's camera model, pixel (i, j)'s centre lands on
+    ((i + 0.5) / W, (j + 0.5) / H); z / w is 1 / depth."""
+    tan_half_fov = camera_block(camera)[12]
+    aspect = width / height
+    projection = np.array([[0.5 / (aspect * tan_half_fov), 0.0, 0.0, 0.0],
+                           [0.0, -0.5 / tan_half_fov, 0.0, 0.0],
+                           [0.5, 0.5, 0.0, 1.0],
+                           [0.0, 0.0, 1.0, 0.0]])
+    return world_to_camera(camera) @ projection
+
+
 def _scalar(double: bool):
     return np.float64 if double else np.float32
 
@@ -84,8 +110,9 @@ def _guard(action: str):
 
 
 def render(program, device: Device, frame: Frame, params, lanes: int, double: bool,
-           progress: Callable[[int], None] | None = None) -> np.ndarray:
-    """Render `frame`: an (H, W, 9) float32 array of CHANNELS per pixel."""
+           progress: Callable[[int], None] | None = None, channels: tuple[str, ...] = CHANNELS) -> np.ndarray:
+    """Render `frame`: an (H, W, len(channels)) float32 array, a pixel's
+    `channels` (those the program was emitted with) in order."""
     import pyopencl as cl
     width, height = frame.width, frame.height
     kernel = cl.Kernel(program, "render")
@@ -94,7 +121,7 @@ def render(program, device: Device, frame: Frame, params, lanes: int, double: bo
     step_x, step_y = (block_width * group[0], block_height * group[1]) if group else (block_width, block_height)
     pitch, rows = _round_up(width, step_x), _round_up(height, step_y)
     tile_width, tile_height = _round_up(min(TILE_WIDTH, pitch), step_x), _round_up(min(TILE_HEIGHT, rows), step_y)
-    image = np.empty((rows, pitch, len(CHANNELS)), dtype=np.float32)
+    image = np.empty((rows, pitch, len(channels)), dtype=np.float32)
     with _guard("rendering"):
         params_buffer = _constant_buffer(device, params, double)
         camera_buffer = _constant_buffer(device, frame.camera, double)

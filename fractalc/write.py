@@ -1,14 +1,16 @@
 """Stage 7: arrays -> image file (`write`).
 
-EXR: float, linear, channels R G B A Z N.x N.y N.z steps. Anything else
-(PNG, ...): sRGB 8-bit RGBA. Both carry the metadata (`fractalc:` names)
-where the format has room for it (EXR header, PNG text).
+EXR: float (or half), linear, channels R G B A Z N.x N.y N.z steps and
+the passes asked for (docs/compositing.md), with the OpenEXR standard
+`worldToCamera` and `worldToNDC` matrices. Anything else (PNG, ...): sRGB
+RGBA, 8 or 16 bits, straight alpha. Both carry the metadata (`fractalc:`
+names) where the format has room for it (EXR header, PNG text).
 
 The file appears atomically: it is written beside its destination under a
 temporary name, then renamed; the temporary file is removed whatever stops the write (an error, Ctrl-C, or
 the CLI's SIGTERM and SIGHUP handlers). Memory: an EXR is written from the
 render's own array (its channels are already interleaved in EXR order),
-and a PNG is converted in strips of rows into its 8-bit pixels, so that a
+and a PNG is converted in strips of rows into its integer pixels, so that a
 write needs at most a ninth of the float image beyond the render's array.
 """
 from __future__ import annotations
@@ -21,10 +23,18 @@ from contextlib import contextmanager
 import numpy as np
 
 from .errors import RenderError
+from .passes import DEFAULT_CHANNELS
 
-EXR_CHANNELS = ("R", "G", "B", "A", "Z", "N.x", "N.y", "N.z", "steps")
+EXR_CHANNELS = DEFAULT_CHANNELS
 TEMPORARY_PREFIX = ".fractalc-"
 STRIP_ROWS = 64
+COMPRESSIONS = ("zip", "zips", "piz", "pxr24", "b44", "b44a", "dwaa", "dwab", "rle", "none")
+PNG_BITS = (8, 16)
+# metadata holding a 4x4 matrix (16 numbers, row-major): OpenEXR standard
+# attributes of type m44f in an EXR (OpenImageIO's names on the left)
+MATRICES = {"worldtocamera": "worldToCamera", "worldtoNDC": "worldToNDC"}
+# channels kept in float by `half`: positions need more than half's 11 bits
+FLOAT_ONLY = ("Z", "P.x", "P.y", "P.z")
 
 
 def linear_to_srgb(linear: np.ndarray) -> np.ndarray:
@@ -33,37 +43,45 @@ def linear_to_srgb(linear: np.ndarray) -> np.ndarray:
 
 
 def _interleaved(planes: dict[str, np.ndarray]) -> np.ndarray:
-    """The planes as one (H, W, 9) float32 array in EXR channel order. A
-    render's planes are views of such an array, the kernel's own: then it
-    is that array, not a copy."""
+    """The planes as one (H, W, channels) float32 array, in the planes'
+    order. A render's planes are views of such an array, the kernel's own:
+    then it is that array, not a copy."""
     def address(array):
         return array.__array_interface__["data"][0]
 
-    first = planes[EXR_CHANNELS[0]]
+    ordered = list(planes.values())
+    first = ordered[0]
     itemsize = first.itemsize
     # plane i starts i values after plane 0, with the same strides: the
     # view below covers exactly the planes' own memory
     if all(p.dtype == np.float32 and p.shape == first.shape and p.strides == first.strides
            and address(p) == address(first) + i * itemsize
-           for i, p in enumerate(planes[c] for c in EXR_CHANNELS)):
-        pixels = np.lib.stride_tricks.as_strided(first, (*first.shape, len(EXR_CHANNELS)),
+           for i, p in enumerate(ordered)):
+        pixels = np.lib.stride_tricks.as_strided(first, (*first.shape, len(ordered)),
                                                  (*first.strides, itemsize), writeable=False)
         if pixels.flags.c_contiguous:
             return pixels
-    return np.stack([planes[c] for c in EXR_CHANNELS], axis=-1).astype(np.float32, copy=False)
+    return np.stack(ordered, axis=-1).astype(np.float32, copy=False)
 
 
-def _srgb_rgba8(planes: dict[str, np.ndarray]) -> np.ndarray:
-    """sRGB 8-bit RGBA, converted in strips of rows: the float temporaries
-    of the conversion stay a strip's size."""
+def _srgb_rgba(planes: dict[str, np.ndarray], bits: int, transparent: bool) -> np.ndarray:
+    """sRGB RGBA in `bits`-bit integers, converted in strips of rows (the
+    float temporaries of the conversion stay a strip's size). Alpha is
+    straight: a transparent render's premultiplied colour is divided by its
+    coverage; an opaque render (its background fills the misses) is opaque."""
     height, width = planes["A"].shape
-    rgba8 = np.empty((height, width, 4), dtype=np.uint8)
+    top_value = float(2 ** bits - 1)
+    pixels = np.empty((height, width, 4), dtype=np.uint16 if bits == 16 else np.uint8)
     for top in range(0, height, STRIP_ROWS):
         rows = slice(top, top + STRIP_ROWS)
-        rgb = linear_to_srgb(np.stack([planes[c][rows] for c in "RGB"], axis=-1))
-        rgba = np.concatenate([rgb, np.clip(planes["A"][rows], 0, 1)[..., None]], axis=-1)
-        rgba8[rows] = np.round(rgba * 255.0)
-    return rgba8
+        rgb = np.stack([planes[c][rows] for c in "RGB"], axis=-1)
+        alpha = np.clip(planes["A"][rows], 0, 1) if transparent else np.ones_like(planes["A"][rows])
+        if transparent:
+            covered = alpha > 0
+            rgb = np.where(covered[..., None], rgb / np.where(covered, alpha, 1)[..., None], 0)
+        rgba = np.concatenate([linear_to_srgb(rgb), alpha[..., None]], axis=-1)
+        pixels[rows] = np.round(rgba * top_value)
+    return pixels
 
 
 class WriteError(RenderError):
@@ -135,25 +153,46 @@ def output_problem(path: str, folders_made: bool = False) -> str | None:
     return None
 
 
-def write(path: str, planes: dict[str, np.ndarray], metadata: dict[str, str]) -> None:
-    """Write the render's planes to `path` (format from its extension)."""
+def write(path: str, planes: dict[str, np.ndarray], metadata: dict[str, str], half: bool = False,
+          compression: str = "zip", bits: int = 8) -> None:
+    """Write the render's planes (channel name -> (H, W) array, in channel
+    order, R G B A Z first) to `path` (format from its extension). EXR:
+    `half` stores all channels but FLOAT_ONLY as half floats, `compression`
+    is one of COMPRESSIONS. Other formats: RGBA of `bits` (8 or 16) bits
+    where the format has them."""
     import OpenImageIO as oiio
+    if compression not in COMPRESSIONS:
+        raise ValueError(f"compression must be one of {', '.join(COMPRESSIONS)}, not {compression!r}")
+    if bits not in PNG_BITS:
+        raise ValueError(f"bits must be 8 or 16, not {bits!r}")
     exr = path.lower().endswith(".exr")
     height, width = planes["Z"].shape
-    spec = oiio.ImageSpec(width, height, len(EXR_CHANNELS) if exr else 4, oiio.FLOAT if exr else oiio.UINT8)
-    spec.channelnames = EXR_CHANNELS if exr else ("R", "G", "B", "A")
+    names = tuple(planes) if exr else ("R", "G", "B", "A")
+    spec = oiio.ImageSpec(width, height, len(names), oiio.FLOAT if exr else
+                          (oiio.UINT16 if bits == 16 else oiio.UINT8))
+    spec.channelnames = names
     spec.alpha_channel = 3
+    matrices = {name: metadata[name] for name in MATRICES.values() if name in metadata}
     if exr:
         spec.z_channel = 4
-        spec.attribute("compression", "zip")
+        spec.attribute("compression", compression)
+        if half:
+            spec.channelformats = tuple(oiio.FLOAT if n in FLOAT_ONLY else oiio.HALF for n in names)
+        for oiio_name, name in MATRICES.items():
+            if name in matrices:
+                spec.attribute(oiio_name, oiio.TypeMatrix44, tuple(float(x) for x in matrices.pop(name).split()))
     else:
-        # the colour is stored as it is (alpha is 1 where fractalc renders):
-        # else OpenImageIO divides it by alpha, in float copies of the image
+        # the colour is written as `_srgb_rgba` makes it, straight: else
+        # OpenImageIO divides it by alpha itself, in float copies of the image
         spec.attribute("oiio:UnassociatedAlpha", 1)
     for key, value in metadata.items():
-        spec.attribute(f"fractalc:{key}", str(value))
+        if key not in MATRICES.values():
+            spec.attribute(f"fractalc:{key}", str(value))
+    for name, value in matrices.items():     # PNG: the matrices as text, under their EXR names
+        spec.attribute(name, value)
     spec.attribute("Software", f"fractalc {metadata.get('version', '')}".strip())
-    pixels = _interleaved(planes) if exr else _srgb_rgba8(planes)
+    transparent = metadata.get("render.background") == "transparent"
+    pixels = _interleaved(planes) if exr else _srgb_rgba(planes, bits, transparent)
     with replacing(path) as temporary:
         output = oiio.ImageOutput.create(temporary)
         if output is None or not output.open(temporary, spec):

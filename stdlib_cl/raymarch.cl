@@ -4,9 +4,12 @@
 //   vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, real steps, mask hit,
 //              __constant scalar *params);
 //   real scene_bound(__constant scalar *params, vec3 *centre);  (a bounded scene)
+//   vec3 shade_passes(..., shading_passes *passes);  (with the shading passes)
 //   MAX_STEPS, MAX_DISTANCE, HIT_EPSILON (0 = pixel footprint), BACKGROUND,
-//   LANES_X, LANES_Y, LANE_X, LANE_Y, and the constants of the effects the
-//   scene uses.
+//   LANES_X, LANES_Y, LANE_X, LANE_Y, the output's CHANNELS and each
+//   channel's index CHANNEL_NAME (R, G, B, A, Z, N_X, ..., then the passes
+//   asked for: P_X, DIFFUSE_R, AO, ...; fractalc/passes.py), and the
+//   constants of the effects the scene uses.
 // `#if FEATURE_...` blocks are resolved by the emitter: a scene's kernel holds
 // only the effects it uses (the directives themselves are gone from it).
 
@@ -19,18 +22,6 @@
 #define CAMERA_APERTURE 13      // lens diameter (read only with depth of field)
 #define CAMERA_FOCUS 14         // distance of the plane in focus, along forward
 #define CAMERA_SIZE 15
-
-// Output channels of a pixel, in the EXR's order.
-#define CHANNEL_R 0
-#define CHANNEL_G 1
-#define CHANNEL_B 2
-#define CHANNEL_A 3
-#define CHANNEL_Z 4
-#define CHANNEL_NX 5
-#define CHANNEL_NY 6
-#define CHANNEL_NZ 7
-#define CHANNEL_STEPS 8
-#define CHANNELS 9
 
 // Hart's clarity function: the hit threshold grows with t by the angle one
 // pixel subtends, or stays the scene's constant epsilon.
@@ -187,6 +178,13 @@ void store_channel(lane_float v, int channel, __global float *block, int pitch) 
 #endif
 }
 
+// Stores a vector per lane into three consecutive channels from `first`.
+void store_vec3(vec3 v, int first, __global float *block, int pitch) {
+    store_channel(TO_FLOAT(v.x), first, block, pitch);
+    store_channel(TO_FLOAT(v.y), first + 1, block, pitch);
+    store_channel(TO_FLOAT(v.z), first + 2, block, pitch);
+}
+
 // The surface normal where a march hit (0 elsewhere).
 vec3 hit_normal(vec3 origin, vec3 dir, march_result m, scalar pixel_angle, __constant scalar *params) {
     vec3 normal = v3((real)0.0f, 0.0f, 0.0f);
@@ -314,6 +312,16 @@ vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 
 }
 #endif
 
+#if FEATURE_GLOW
+// Glow, added after fog so that fog does not hide it: misses are lit by how
+// close they passed to the surface (emission: it adds colour, not coverage).
+vec3 glow_color(march_result m) {
+    real glow = SELECT((real)0.0f, GLOW_STRENGTH * exp(-max(m.closest, 0.0f) / GLOW_RADIUS),
+                       m.hit == (mask)0);
+    return v3_scale(v3(GLOW_R, GLOW_G, GLOW_B), glow);
+}
+#endif
+
 // Colour seen along one ray: the shaded surface or the background, then
 // transparency, reflections, fog and glow.
 vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel_angle,
@@ -333,12 +341,13 @@ vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixe
 #if FEATURE_FOG
     color = fogged(color, m.t, m.hit);
 #endif
+#if FEATURE_TRANSPARENT_BACKGROUND
+    // a miss is empty (zero colour and, in the kernel, zero coverage), fog
+    // or no fog: RGB is premultiplied by the coverage
+    color = v3_select(v3((real)0.0f, 0.0f, 0.0f), color, m.hit);
+#endif
 #if FEATURE_GLOW
-    // Glow, after fog so that fog does not hide it: misses are lit by how
-    // close they passed to the surface.
-    real glow = SELECT((real)0.0f, GLOW_STRENGTH * exp(-max(m.closest, 0.0f) / GLOW_RADIUS),
-                       m.hit == (mask)0);
-    color = v3_add(color, v3_scale(v3(GLOW_R, GLOW_G, GLOW_B), glow));
+    color = v3_add(color, glow_color(m));
 #endif
     return color;
 }
@@ -347,7 +356,8 @@ vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixe
 // pixels whose top-left pixel is (x0 + gx * LANES_X, y0 + gy * LANES_Y)
 // (compact blocks keep a work-item's rays alike, so its lanes diverge less
 // than a row of LANES would). `out`: the whole image, whatever the tile:
-// rows of `pitch` pixels of CHANNELS floats (R G B A Z N.x N.y N.z steps),
+// rows of `pitch` pixels of CHANNELS floats (R G B A Z N.x N.y N.z steps,
+// then the passes asked for),
 // pixel (x, y) at (y * pitch + x) * CHANNELS; pitch >= width and its row
 // count >= height are multiples of LANES_X and LANES_Y (blocks past the
 // image's edge write there).
@@ -374,6 +384,7 @@ __kernel void render(__global float *out, __constant scalar *params,
     vec3 normal = hit_normal(origin, dir, centre, pixel_angle, params);
 
     vec3 color;
+    real coverage;   // the fraction of the pixel's samples that hit
 #if FEATURE_DEPTH_OF_FIELD
     bool pinhole = false;   // every sample goes through the lens
 #else
@@ -381,12 +392,14 @@ __kernel void render(__global float *out, __constant scalar *params,
 #endif
     if (pinhole) {
         color = trace_color(origin, dir, centre, normal, pixel_angle, params);
+        coverage = SELECT((real)0.0f, (real)1.0f, centre.hit);
     } else {
         // Stratified: a columns x rows array of cells covering the pixel,
         // one jittered sample per cell (square counts fill every cell).
         int columns = (int)ceil(sqrt((float)samples));
         int rows = (samples + columns - 1) / columns;
         color = v3((real)0.0f, 0.0f, 0.0f);
+        coverage = 0.0f;
         for (int s = 0; s < samples; s++) {
             lane_uint key = hash_lanes(pixel_id * (uint)samples + (uint)s) ^ seed;
             real jx = ((real)(s % columns) + unit_random(key)) / (scalar)columns;
@@ -400,8 +413,10 @@ __kernel void render(__global float *out, __constant scalar *params,
             march_result m = march(sample_origin, sample_dir, inside, pixel_angle, jitter, params);
             vec3 sample_normal = hit_normal(sample_origin, sample_dir, m, pixel_angle, params);
             color = v3_add(color, trace_color(sample_origin, sample_dir, m, sample_normal, pixel_angle, params));
+            coverage = coverage + SELECT((real)0.0f, (real)1.0f, m.hit);
         }
         color = v3_scale(color, (real)(1.0f / (scalar)samples));
+        coverage = coverage * (real)(1.0f / (scalar)samples);
     }
 
     __global float *block = out + (block_y * pitch + block_x) * CHANNELS;
@@ -409,12 +424,47 @@ __kernel void render(__global float *out, __constant scalar *params,
     store_channel(TO_FLOAT(color.x), CHANNEL_R, block, pitch);
     store_channel(TO_FLOAT(color.y), CHANNEL_G, block, pitch);
     store_channel(TO_FLOAT(color.z), CHANNEL_B, block, pitch);
-    store_channel(TO_FLOAT((real)1.0f), CHANNEL_A, block, pitch);
+    store_channel(TO_FLOAT(coverage), CHANNEL_A, block, pitch);
     store_channel(TO_FLOAT(depth), CHANNEL_Z, block, pitch);
-    store_channel(TO_FLOAT(normal.x), CHANNEL_NX, block, pitch);
-    store_channel(TO_FLOAT(normal.y), CHANNEL_NY, block, pitch);
-    store_channel(TO_FLOAT(normal.z), CHANNEL_NZ, block, pitch);
+    store_vec3(normal, CHANNEL_N_X, block, pitch);
     store_channel(TO_FLOAT(centre.steps), CHANNEL_STEPS, block, pitch);
+
+    // The passes asked for, of the pixel-centre ray like the AOVs above
+    // (0 where it missed).
+    vec3 zero = v3((real)0.0f, 0.0f, 0.0f);
+#if FEATURE_PASS_P
+    vec3 hit_point = v3_select(zero, v3_add(origin, v3_scale(dir, centre.t)), centre.hit);
+    store_vec3(hit_point, CHANNEL_P_X, block, pitch);
+#endif
+#if FEATURE_SHADING_PASSES
+    shading_passes passes;
+    passes.diffuse = zero;
+    passes.specular = zero;
+    passes.shadow = 0.0f;
+    passes.occlusion = 0.0f;
+    if (ANY(centre.hit))
+        shade_passes(v3_add(origin, v3_scale(dir, centre.t)), normal, dir, hit_threshold(centre.t, pixel_angle),
+                     centre.steps, centre.hit, params, &passes);
+#endif
+#if FEATURE_PASS_DIFFUSE
+    store_vec3(v3_select(zero, passes.diffuse, centre.hit), CHANNEL_DIFFUSE_R, block, pitch);
+#endif
+#if FEATURE_PASS_SPECULAR
+    store_vec3(v3_select(zero, passes.specular, centre.hit), CHANNEL_SPECULAR_R, block, pitch);
+#endif
+#if FEATURE_PASS_AO
+    store_channel(TO_FLOAT(SELECT((real)0.0f, passes.occlusion, centre.hit)), CHANNEL_AO, block, pitch);
+#endif
+#if FEATURE_PASS_SHADOW
+    store_channel(TO_FLOAT(SELECT((real)0.0f, passes.shadow, centre.hit)), CHANNEL_SHADOW, block, pitch);
+#endif
+#if FEATURE_PASS_GLOW
+    vec3 glow = zero;   // none in a scene without glow
+#if FEATURE_GLOW
+    glow = glow_color(centre);
+#endif
+    store_vec3(glow, CHANNEL_GLOW_R, block, pitch);
+#endif
 }
 
 // Distance estimates at points: `points` holds count x's, then count y's,
