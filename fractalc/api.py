@@ -61,6 +61,17 @@ class Image:
         write(path, self.planes(), self.metadata, half=half, compression=compression, bits=bits)
 
 
+def image_from_pixels(pixels: np.ndarray, aovs: tuple[str, ...], metadata: dict) -> Image:
+    """The Image of a render's (H, W, channels) pixels (run.CHANNELS, then
+    the `aovs` passes' channels): views of them, no copies."""
+    passes, first = {}, len(run.CHANNELS)
+    for name in aovs:
+        count = len(PASSES[name])
+        passes[name] = pixels[..., first:first + count]
+        first += count
+    return Image(pixels[..., 0:4], pixels[..., 4], pixels[..., 5:8], pixels[..., 8], metadata, passes)
+
+
 class Scene:
     """A checked scene, ready to compile and render."""
 
@@ -195,14 +206,28 @@ class Scene:
         return run.distances(program, self.device, points, self._param_values(),
                              target.lanes, target.double)
 
+    def mesh(self, resolution: int = 256, bounds=None, progress: bool = False):
+        """The surface as a watertight triangle mesh (fractalc.mesh.Mesh:
+        vertices, faces, normals; `.save(path)`), sampled on a grid of
+        `resolution` cells along the longest side of `bounds` (xmin, ymin,
+        zmin, xmax, ymax, zmax; default: around the scene's bound, which an
+        unbounded scene lacks). Needs the 'mesh' extra (scikit-image)."""
+        from .mesh import mesh
+        return mesh(self, resolution, bounds, progress)
+
     def render(self, seed: int = 0, progress: bool = False, camera: Camera | None = None,
-               **render_keys) -> Image:
+               cluster=None, **render_keys) -> Image:
         """Render with the file's settings, overridden by keyword (any render
         key: width=, height=, samples=, ao=, max_steps=, ...); `camera`
         replaces the file's camera (no rebuild); `aovs` names the passes
-        to add to the default channels (passes.PASSES: P, diffuse, ...)."""
+        to add to the default channels (passes.PASSES: P, diffuse, ...).
+        `cluster`: a Dask client (distributed.Client) whose workers render
+        the image in row tiles (docs/cluster.md)."""
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2 ** 32:
             raise ValueError(f"seed must be a whole number from 0 to {2 ** 32 - 1}, not {seed!r}")
+        if cluster is not None:
+            from .cluster import render_still
+            return render_still(self, cluster, seed, camera, progress, **render_keys)
         settings = self._settings(render_keys)
         names = channels(settings.aovs)
         camera = camera or self.checked.camera
@@ -220,14 +245,7 @@ class Scene:
             if bar:
                 bar.close()
         seconds = time.perf_counter() - start
-        # views of the kernel's pixels: no copies
-        passes, first = {}, len(run.CHANNELS)
-        for name in settings.aovs:
-            count = len(PASSES[name])
-            passes[name] = pixels[..., first:first + count]
-            first += count
-        return Image(pixels[..., 0:4], pixels[..., 4], pixels[..., 5:8], pixels[..., 8],
-                     self._metadata(settings, camera, seconds), passes)
+        return image_from_pixels(pixels, settings.aovs, self._metadata(settings, camera, seconds))
 
     def _metadata(self, settings: RenderSettings, camera: Camera, seconds: float) -> dict[str, str]:
         vector = lambda v: " ".join(f"{x:g}" for x in v)  # noqa: E731

@@ -282,6 +282,50 @@ def command_animate(args) -> int:
     return 0
 
 
+def _bounds(text: str) -> tuple[float, ...]:
+    """--bounds: XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX, each minimum below its maximum."""
+    from .check import in_float_range
+    try:
+        values = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 6 or not all(in_float_range(v) for v in values):
+        raise argparse.ArgumentTypeError(f"'{text}' is not six numbers XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX")
+    if not all(low < high for low, high in zip(values[:3], values[3:])):
+        raise argparse.ArgumentTypeError(f"'{text}': each minimum must be less than its maximum")
+    return values
+
+
+def command_mesh(args) -> int:
+    from .mesh import FORMATS, require_scikit_image
+    if not args.output.lower().endswith(FORMATS):
+        raise UsageError(f"-o {args.output}: the output must end in one of {', '.join(FORMATS)}")
+    if not 2 <= args.resolution <= 16384:
+        raise UsageError("--resolution must be from 2 to 16384")
+    try:
+        require_scikit_image()
+    except ImportError as error:
+        raise UsageError(str(error)) from None
+    _require_writable(("-o", args.output, args.output))
+    scene = _load(args)
+    if args.bounds is None:
+        from .mesh import bounds_of
+        try:
+            bounds_of(scene)
+        except ValueError as error:
+            raise UsageError(f"{error} with --bounds=XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX") from None
+    start = time.perf_counter()
+    try:
+        mesh = scene.mesh(resolution=args.resolution, bounds=args.bounds, progress=not args.quiet)
+    except ValueError as error:     # no surface inside the bounds
+        raise RenderError(str(error)) from None
+    mesh.save(args.output)
+    if not args.quiet:
+        print(f"wrote {args.output} ({len(mesh.vertices)} vertices, {len(mesh.faces)} triangles, "
+              f"{time.perf_counter() - start:.2f} s)", file=sys.stderr)
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="fractalc", description="Compile and render .frac fractal scenes.")
     from . import __version__
@@ -403,6 +447,22 @@ def _parser() -> argparse.ArgumentParser:
     animate.add_argument("--overwrite", action="store_true", help="render every frame, even those on disk")
     image_options(animate)
     animate.set_defaults(run=command_animate)
+
+    mesh = commands.add_parser("mesh", help="export the surface as a triangle mesh (STL, PLY, OBJ)",
+                               description="Sample the distance estimate on a grid over the scene's bound "
+                                           "and write the surface as a watertight triangle mesh with "
+                                           "vertex normals (docs/meshes.md). Needs scikit-image (the "
+                                           "'mesh' extra).")
+    mesh.add_argument("scene")
+    mesh.add_argument("-o", "--output", required=True, help="output mesh (.stl, .ply or .obj)")
+    mesh.add_argument("--resolution", type=int, default=256, metavar="N",
+                      help="grid cells along the longest side of the bounds (default 256)")
+    mesh.add_argument("--bounds", type=_bounds, metavar="XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX",
+                      help="the box to mesh, written --bounds=-1,-1,-1,1,1,1 when it starts with a "
+                           "minus (default: around the scene's bound; required for unbounded scenes)")
+    mesh.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    device_options(mesh)
+    mesh.set_defaults(run=command_mesh)
 
     devices = commands.add_parser("devices", help="list OpenCL devices and the rays per work-item of each",
                                   description="List the OpenCL devices. For each CPU device, the rays "

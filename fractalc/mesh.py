@@ -1,0 +1,260 @@
+"""`fractalc mesh`: the scene's surface as a triangle mesh (STL, PLY, OBJ).
+
+The distance estimate is sampled by the compiled kernel on a grid over the
+scene's bounding box, a few z-planes at a time, so that memory stays
+bounded whatever the resolution (only the mesh itself grows with it).
+Each slab of planes goes through scikit-image's marching cubes; slabs share
+their boundary plane, whose vertices are welded to the previous slab's.
+The grid is surrounded by samples outside the surface, so a surface cut by
+the bounds is closed by a cap there: the mesh is always watertight. Vertex
+normals are the kernel's gradient by central differences.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+
+from .write import replacing
+
+FORMATS = (".stl", ".ply", ".obj")
+INSTALL_HINT = "meshes need scikit-image: pip install 'fractalc[mesh]'"
+CHUNK_POINTS = 1 << 21   # distance evaluations per kernel call: ~100 MB of host arrays at most
+DEFAULT_RESOLUTION = 256
+
+
+def require_scikit_image() -> None:
+    """Fail before any work if marching cubes is not installed."""
+    try:
+        import skimage.measure  # noqa: F401
+    except ImportError:
+        raise ImportError(INSTALL_HINT) from None
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """A triangle mesh: (V, 3) float32 vertices, (F, 3) int32 faces
+    (counter-clockwise seen from outside) and (V, 3) float32 unit normals."""
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+
+    def __repr__(self) -> str:
+        return f"<Mesh {len(self.vertices)} vertices, {len(self.faces)} faces>"
+
+    def volume(self) -> float:
+        """The enclosed volume (divergence theorem; exact for a closed mesh)."""
+        a, b, c = (self.vertices[self.faces[:, i]].astype(np.float64) for i in range(3))
+        return float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
+
+    def save(self, path: str) -> None:
+        """Write binary STL, binary PLY or OBJ (by the extension), atomically."""
+        writer = _WRITERS.get(_extension(path))
+        if writer is None:
+            raise ValueError(f"a mesh is written as {', '.join(FORMATS)}, not {path}")
+        with replacing(path) as temporary, open(temporary, "wb") as f:
+            writer(self, f)
+
+
+def _extension(path: str) -> str:
+    return "." + path.rsplit(".", 1)[-1].lower() if "." in path else ""
+
+
+def _face_normals(mesh: Mesh) -> np.ndarray:
+    a, b, c = (mesh.vertices[mesh.faces[:, i]] for i in range(3))
+    normals = np.cross(b - a, c - a)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    return normals / np.where(length > 0, length, 1.0)
+
+
+def _write_stl(mesh: Mesh, f) -> None:
+    record = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
+    triangles = np.zeros(len(mesh.faces), dtype=record)
+    triangles["normal"] = _face_normals(mesh)
+    triangles["corners"] = mesh.vertices[mesh.faces]
+    f.write(b"fractalc binary STL".ljust(80, b" "))
+    f.write(np.uint32(len(mesh.faces)).tobytes())
+    f.write(triangles.tobytes())
+
+
+def _write_ply(mesh: Mesh, f) -> None:
+    f.write((f"ply\nformat binary_little_endian 1.0\ncomment made by fractalc\n"
+             f"element vertex {len(mesh.vertices)}\n"
+             "property float x\nproperty float y\nproperty float z\n"
+             "property float nx\nproperty float ny\nproperty float nz\n"
+             f"element face {len(mesh.faces)}\nproperty list uchar int vertex_indices\nend_header\n").encode())
+    f.write(np.hstack([mesh.vertices, mesh.normals]).astype("<f4").tobytes())
+    faces = np.zeros(len(mesh.faces), dtype=[("count", "u1"), ("indices", "<i4", 3)])
+    faces["count"] = 3
+    faces["indices"] = mesh.faces
+    f.write(faces.tobytes())
+
+
+def _write_obj(mesh: Mesh, f) -> None:
+    f.write(b"# made by fractalc\n")
+    np.savetxt(f, mesh.vertices, fmt="v %.7g %.7g %.7g")
+    np.savetxt(f, mesh.normals, fmt="vn %.6g %.6g %.6g")
+    corners = np.repeat(mesh.faces + 1, 2, axis=1)    # OBJ counts from 1; each corner is v//vn
+    np.savetxt(f, corners, fmt="f %d//%d %d//%d %d//%d")
+
+
+_WRITERS = {".stl": _write_stl, ".ply": _write_ply, ".obj": _write_obj}
+
+
+@dataclass(frozen=True)
+class Grid:
+    """The sample points: lower + spacing * (i, j, k) for i < counts[0], ..."""
+    lower: np.ndarray
+    spacing: float
+    counts: tuple[int, int, int]
+
+    @staticmethod
+    def over(lower, upper, resolution: int) -> "Grid":
+        """`resolution` cells along the box's longest side, as many of the
+        same size as cover each other side."""
+        lower, upper = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
+        spacing = float(np.max(upper - lower)) / resolution
+        counts = tuple(int(math.ceil((u - l) / spacing - 1e-9)) + 1 for l, u in zip(lower, upper))
+        return Grid(lower, spacing, counts)
+
+    def planes_per_slab(self, chunk_points: int = CHUNK_POINTS) -> int:
+        """z-planes evaluated per kernel call: as many as fit in a chunk."""
+        return max(1, chunk_points // (self.counts[0] * self.counts[1]))
+
+    def plane_points(self, first: int, count: int) -> np.ndarray:
+        """The (count * nx * ny, 3) points of z-planes first..first+count-1,
+        x varying fastest."""
+        nx, ny, _ = self.counts
+        x = self.lower[0] + self.spacing * np.arange(nx)
+        y = self.lower[1] + self.spacing * np.arange(ny)
+        z = self.lower[2] + self.spacing * np.arange(first, first + count)
+        zz, yy, xx = np.meshgrid(z, y, x, indexing="ij")
+        return np.stack([xx.ravel(), yy.ravel(), zz.ravel()], axis=1)
+
+
+def bounds_of(scene, bounds=None) -> tuple[np.ndarray, np.ndarray]:
+    """The box to mesh: `bounds` (xmin, ymin, zmin, xmax, ymax, zmax), else
+    the cube around the scene's bounding sphere, a little larger."""
+    if bounds is not None:
+        values = np.asarray(bounds, dtype=np.float64)
+        if values.shape != (6,) or not np.all(np.isfinite(values)):
+            raise ValueError("bounds must be six finite numbers: xmin, ymin, zmin, xmax, ymax, zmax")
+        if not np.all(values[:3] < values[3:]):
+            raise ValueError("bounds: each minimum must be less than its maximum")
+        return values[:3], values[3:]
+    from .lower import lower
+    scene_bound = lower(scene.checked).bound
+    # a ground plane's half-space reaches past any sphere
+    sphere = scene.bound() if scene_bound is not None and not scene_bound.half_spaces else None
+    if sphere is None:
+        raise ValueError(f"{scene.checked.file} is unbounded (a plane, repetition or warp): "
+                         "give the bounds of the part to mesh")
+    centre, radius = np.asarray(sphere[0], np.float64), sphere[1]
+    radius *= 1.02     # the surface never touches the grid's edge
+    return centre - radius, centre + radius
+
+
+def mesh(scene, resolution: int = DEFAULT_RESOLUTION, bounds=None, progress: bool = False,
+         chunk_points: int = CHUNK_POINTS) -> Mesh:
+    """The scene's surface (distance 0) as a watertight mesh, from the
+    distance estimate on a grid of `resolution` cells along the longest
+    side of `bounds` (default: the scene's bound)."""
+    require_scikit_image()
+    if isinstance(resolution, bool) or not isinstance(resolution, (int, np.integer)) or not 2 <= resolution <= 16384:
+        raise ValueError(f"resolution must be a whole number from 2 to 16384, not {resolution!r}")
+    grid = Grid.over(*bounds_of(scene, bounds), resolution)
+    vertices, faces = _march(scene, grid, progress, chunk_points)
+    return Mesh(vertices, faces, _normals(scene, vertices, grid.spacing, chunk_points))
+
+
+def _march(scene, grid: Grid, progress: bool, chunk_points: int) -> tuple[np.ndarray, np.ndarray]:
+    from skimage.measure import marching_cubes
+    from tqdm import tqdm
+    nx, ny, nz = grid.counts
+    step = grid.planes_per_slab(chunk_points)
+    outside = np.float32(grid.spacing)   # the padding around the grid: outside the surface
+    previous = np.full((nx + 2, ny + 2, 1), outside, np.float32)   # padded plane 0, below the grid
+    vertex_parts, face_parts = [], []
+    vertex_count, seam = 0, None      # seam: the previous slab's top-plane vertices (keys, indices)
+    bar = tqdm(total=nz, unit="plane", leave=False, desc="meshing",
+               disable=not (progress and sys.stderr.isatty()))
+    try:
+        # padded planes: 0 and nz + 1 are the padding, 1..nz the grid's planes 0..nz-1;
+        # a slab is padded planes first..last, sharing plane `first` with the slab before
+        for first in range(0, nz + 1, step):
+            last = min(first + step, nz + 1)
+            slab = np.full((nx + 2, ny + 2, last - first + 1), outside, np.float32)
+            slab[..., :1] = previous
+            count = min(last, nz) - first
+            if count > 0:
+                values = scene.distance(grid.plane_points(first, count)).astype(np.float32)
+                slab[1:-1, 1:-1, 1:count + 1] = values.reshape(count, ny, nx).transpose(2, 1, 0)
+            previous = slab[..., -1:].copy()
+            bar.update(max(count, 0))
+            crossing = slab.min() < 0 < slab.max()
+            if not crossing:
+                seam = None
+                continue
+            verts, faces, seam = _slab_mesh(marching_cubes(slab, 0.0, gradient_direction="descent",
+                                                           allow_degenerate=False)[:2],
+                                            slab.shape[2] - 1, seam, vertex_count)
+            verts[:, 2] += first - 1      # padded plane index to grid plane index
+            vertex_parts.append(verts)
+            face_parts.append(faces)
+            vertex_count += len(verts)
+    finally:
+        bar.close()
+    if not vertex_parts:
+        raise ValueError("no surface inside the bounds (the distance has the same sign everywhere)")
+    # padded indices: sample (i, j) is at padded (i + 1, j + 1); a cap
+    # between the padding and the grid's edge goes onto the edge
+    vertices = np.clip(np.concatenate(vertex_parts) - [1, 1, 0], 0, np.subtract(grid.counts, 1))
+    vertices = (grid.lower + grid.spacing * vertices).astype(np.float32)
+    return vertices, np.concatenate(face_parts).astype(np.int32)
+
+
+def _slab_mesh(marched, top_plane: int, seam, vertex_count: int):
+    """A slab's new vertices (those not on the previous slab's top plane)
+    and its faces, numbered after the `vertex_count` vertices before it;
+    and the seam for the next slab: its top-plane vertices' (x, y) keys,
+    sorted, and their numbers."""
+    verts, triangles = marched
+    index = np.full(len(verts), -1, dtype=np.int64)
+    bottom = np.flatnonzero(verts[:, 2] == 0)
+    if seam is not None and len(bottom):
+        keys, numbers = seam
+        wanted = _plane_keys(verts[bottom])
+        found = np.minimum(np.searchsorted(keys, wanted), len(keys) - 1)
+        matched = keys[found] == wanted
+        index[bottom[matched]] = numbers[found[matched]]
+    new = index < 0
+    index[new] = vertex_count + np.arange(np.count_nonzero(new))
+    top = np.flatnonzero(verts[:, 2] == top_plane)
+    keys = _plane_keys(verts[top])
+    order = np.argsort(keys)
+    return verts[new].astype(np.float64), index[triangles], (keys[order], index[top][order])
+
+
+def _plane_keys(points: np.ndarray) -> np.ndarray:
+    """One sortable number per (x, y) on a plane (x + iy: complex numbers
+    sort by real part, then imaginary): equal for the same vertex found
+    from either slab (the same edge between the same two samples)."""
+    return points[:, 0].astype(np.float64) + 1j * points[:, 1].astype(np.float64)
+
+
+def _normals(scene, vertices: np.ndarray, spacing: float, chunk_points: int) -> np.ndarray:
+    """The gradient of the distance at each vertex (central differences a
+    quarter of a cell wide), normalised."""
+    offsets = np.vstack([np.eye(3), -np.eye(3)]) * (spacing / 4)
+    normals = np.empty_like(vertices)
+    per_chunk = max(1, chunk_points // len(offsets))
+    for start in range(0, len(vertices), per_chunk):
+        block = vertices[start:start + per_chunk].astype(np.float64)
+        values = scene.distance((block[None, :, :] + offsets[:, None, :]).reshape(-1, 3))
+        values = values.reshape(len(offsets), len(block))
+        gradient = (values[:3] - values[3:]).T
+        length = np.linalg.norm(gradient, axis=1, keepdims=True)
+        normals[start:start + per_chunk] = gradient / np.where(length > 0, length, 1.0)
+    return normals

@@ -1,0 +1,212 @@
+"""`Scene.mesh` and `fractalc mesh`: marching cubes over the kernel's
+distance, in slabs, into watertight meshes and STL/PLY/OBJ files."""
+import struct
+
+import numpy as np
+import pytest
+
+import fractalc
+from fractalc.cli import main
+from fractalc.mesh import Grid, Mesh
+
+pytest.importorskip("skimage.measure", reason="meshes need scikit-image (pip install 'fractalc[mesh]')")
+
+SPHERE = "scene sphere(1)\n"
+
+
+def exit_code(argv) -> int:
+    """main's exit code, also for argparse's own usage errors."""
+    try:
+        return main(argv)
+    except SystemExit as stop:
+        return stop.code
+
+
+def edge_uses(faces: np.ndarray) -> np.ndarray:
+    """How many faces use each undirected edge."""
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    return np.unique(edges, axis=0, return_counts=True)[1]
+
+
+def directed_edges_unique(faces: np.ndarray) -> bool:
+    """Consistent winding: each directed edge belongs to one face."""
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    return len(np.unique(edges, axis=0)) == len(edges)
+
+
+@pytest.fixture(scope="module")
+def sphere_mesh():
+    return fractalc.loads(SPHERE).mesh(resolution=128)
+
+
+def test_sphere_vertices_lie_on_the_unit_sphere(sphere_mesh):
+    radii = np.linalg.norm(sphere_mesh.vertices, axis=1)
+    assert np.abs(radii - 1).max() < 0.01
+
+
+def test_sphere_mesh_is_watertight_and_consistently_wound(sphere_mesh):
+    assert np.all(edge_uses(sphere_mesh.faces) == 2)
+    assert directed_edges_unique(sphere_mesh.faces)
+
+
+def test_sphere_volume_within_one_percent(sphere_mesh):
+    # positive: faces wind counter-clockwise seen from outside
+    assert sphere_mesh.volume() == pytest.approx(4 / 3 * np.pi, rel=0.01)
+
+
+def test_normals_are_the_outward_unit_gradient(sphere_mesh):
+    radial = sphere_mesh.vertices / np.linalg.norm(sphere_mesh.vertices, axis=1, keepdims=True)
+    assert np.allclose(np.linalg.norm(sphere_mesh.normals, axis=1), 1, atol=1e-5)
+    assert np.einsum("ij,ij->i", sphere_mesh.normals, radial).min() > 0.999
+
+
+def test_menger_level_2_volume():
+    # Level 2 keeps (20/27)^2 of the cube [-1,1]^3. Its smallest holes are
+    # 2/9 wide: 64 cells over the bound's cube (side 2 sqrt(3) * 1.02) puts
+    # four cells across each, and marching cubes cuts every edge and corner
+    # of the sponge by about a cell, an error of 0.8% here that falls with
+    # the cell size (0.35% at 96, 0.2% at 128); 64 runs in about a second.
+    mesh = fractalc.loads("scene menger(level: 2)").mesh(resolution=64)
+    assert mesh.volume() == pytest.approx((20 / 27) ** 2 * 8, rel=0.02)
+    assert np.all(edge_uses(mesh.faces) == 2)
+
+
+def test_slabs_weld_into_the_same_mesh_as_one_block():
+    # one z-plane per kernel call against all planes in one: the seams weld,
+    # so the meshes are the same vertex for vertex
+    scene = fractalc.loads("scene torus(1, 0.4).rotate((1, 0, 0), 30)\n")
+    from fractalc.mesh import mesh
+    whole = mesh(scene, 40, chunk_points=10 ** 7)
+    sliced = mesh(scene, 40, chunk_points=1)
+    assert len(sliced.vertices) == len(whole.vertices)
+    # the same points, up to float32 rounding of the grid coordinates
+    rows = [v[np.lexsort(np.round(v, 4).T)] for v in (sliced.vertices, whole.vertices)]
+    assert np.allclose(*rows, rtol=0, atol=1e-5)
+    assert np.all(edge_uses(sliced.faces) == 2)
+
+
+def test_points_per_kernel_call_are_bounded(monkeypatch):
+    # the memory bound: no call evaluates more than a chunk (one z-plane
+    # when a plane is larger), whatever the resolution
+    scene = fractalc.loads(SPHERE)
+    calls = []
+    evaluate = scene.distance
+    monkeypatch.setattr(scene, "distance", lambda points: calls.append(len(points)) or evaluate(points))
+    from fractalc.mesh import mesh
+    mesh(scene, 60, chunk_points=61 * 61 * 3 + 5)
+    assert max(calls) <= 61 * 61 * 3 + 5
+    grid = Grid.over((0, 0, 0), (1, 1, 1), 1024)
+    assert grid.planes_per_slab() * grid.counts[0] * grid.counts[1] <= 2 ** 21
+    assert grid.counts == (1025, 1025, 1025)
+
+
+def test_surface_cut_by_the_bounds_is_capped_on_them():
+    # the top half of the cube [-1,1]^3: the cut at z = 0 is closed by a cap in that plane
+    mesh = fractalc.loads("scene box(2)\n").mesh(resolution=40, bounds=(-2, -2, 0, 2, 2, 2))
+    assert np.all(edge_uses(mesh.faces) == 2)
+    assert mesh.vertices[:, 2].min() == pytest.approx(0, abs=1e-6)
+    assert mesh.volume() == pytest.approx(4.0, rel=0.01)
+
+
+def test_unbounded_scene_needs_bounds():
+    scene = fractalc.loads("scene union(sphere(1), plane(offset: -1))\n")
+    with pytest.raises(ValueError, match="unbounded"):
+        scene.mesh(resolution=16)
+    with pytest.raises(ValueError, match="minimum must be less"):
+        scene.mesh(resolution=16, bounds=(0, 0, 0, 1, -1, 1))
+
+
+def test_no_surface_in_bounds_is_an_error():
+    with pytest.raises(ValueError, match="no surface"):
+        fractalc.loads(SPHERE).mesh(resolution=8, bounds=(2, 2, 2, 3, 3, 3))
+
+
+@pytest.fixture(scope="module")
+def small_mesh():
+    return fractalc.loads(SPHERE).mesh(resolution=12)
+
+
+def test_stl_file_holds_every_triangle(small_mesh, tmp_path):
+    path = tmp_path / "sphere.stl"
+    small_mesh.save(str(path))
+    data = path.read_bytes()
+    (count,) = struct.unpack_from("<I", data, 80)
+    assert count == len(small_mesh.faces) and len(data) == 84 + 50 * count
+    record = np.frombuffer(data, dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")], offset=84)
+    assert np.array_equal(record["v"], small_mesh.vertices[small_mesh.faces])
+
+
+def test_ply_file_round_trips(small_mesh, tmp_path):
+    path = tmp_path / "sphere.ply"
+    small_mesh.save(str(path))
+    data = path.read_bytes()
+    header, body = data.split(b"end_header\n", 1)
+    assert f"element vertex {len(small_mesh.vertices)}".encode() in header
+    vertices = np.frombuffer(body, "<f4", count=6 * len(small_mesh.vertices)).reshape(-1, 6)
+    faces = np.frombuffer(body, [("n", "u1"), ("i", "<i4", 3)], offset=vertices.nbytes)
+    assert np.array_equal(vertices[:, :3], small_mesh.vertices)
+    assert np.array_equal(vertices[:, 3:], small_mesh.normals)
+    assert np.all(faces["n"] == 3) and np.array_equal(faces["i"], small_mesh.faces)
+
+
+def test_obj_file_round_trips(small_mesh, tmp_path):
+    path = tmp_path / "sphere.obj"
+    small_mesh.save(str(path))
+    lines = path.read_text().splitlines()
+    vertices = np.array([line.split()[1:] for line in lines if line.startswith("v ")], float)
+    faces = [line.split()[1:] for line in lines if line.startswith("f ")]
+    assert np.allclose(vertices, small_mesh.vertices, atol=1e-6)
+    assert np.array_equal(np.array([[int(c.split("//")[0]) - 1 for c in f] for f in faces]), small_mesh.faces)
+
+
+def test_unknown_extension_is_refused(small_mesh, tmp_path):
+    with pytest.raises(ValueError, match=".stl"):
+        small_mesh.save(str(tmp_path / "sphere.dae"))
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cli_writes_a_mesh(tmp_path, capsys):
+    scene = tmp_path / "s.frac"
+    scene.write_text(SPHERE)
+    out = tmp_path / "s.stl"
+    assert main(["mesh", str(scene), "-o", str(out), "--resolution", "16", "-q"]) == 0
+    (count,) = struct.unpack_from("<I", out.read_bytes(), 80)
+    assert count > 100
+
+
+@pytest.mark.parametrize("args, message", [
+    (["-o", "OUT.dae"], "-o OUT.dae: the output must end in one of .stl, .ply, .obj"),
+    (["-o", "OUT.stl", "--resolution", "1"], "--resolution must be from 2"),
+    (["-o", "OUT.stl", "--bounds", "1,2,3"], "--bounds: '1,2,3' is not six numbers"),
+    (["-o", "OUT.stl", "--bounds=0,0,0,1,1,0"], "each minimum must be less than its maximum"),
+])
+def test_cli_usage_errors(tmp_path, capsys, args, message):
+    scene = tmp_path / "s.frac"
+    scene.write_text(SPHERE)
+    args = [a.replace("OUT", str(tmp_path / "out")) for a in args]
+    message = message.replace("OUT", str(tmp_path / "out"))
+    assert exit_code(["mesh", str(scene), *args]) == 2
+    assert message in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == [scene]
+
+
+def test_cli_unbounded_scene_is_a_usage_error_naming_bounds(tmp_path, capsys):
+    scene = tmp_path / "u.frac"
+    scene.write_text("scene union(sphere(1), plane(offset: -1))\n")
+    assert main(["mesh", str(scene), "-o", str(tmp_path / "u.stl")]) == 2
+    err = capsys.readouterr().err
+    assert "unbounded" in err and "--bounds" in err and "Traceback" not in err
+
+
+def test_cli_missing_scikit_image_fails_before_any_work(tmp_path, capsys, monkeypatch):
+    import sys
+    monkeypatch.setitem(sys.modules, "skimage.measure", None)   # import fails
+    scene = tmp_path / "s.frac"
+    scene.write_text("scene sphere(\n")      # not even parsed: the extra is checked first
+    assert main(["mesh", str(scene), "-o", str(tmp_path / "s.stl")]) == 2
+    assert "pip install 'fractalc[mesh]'" in capsys.readouterr().err
+
+
+def test_mesh_repr_is_short():
+    mesh = Mesh(np.zeros((3, 3), np.float32), np.array([[0, 1, 2]], np.int32), np.zeros((3, 3), np.float32))
+    assert repr(mesh) == "<Mesh 3 vertices, 1 faces>"
