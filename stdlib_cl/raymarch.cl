@@ -431,15 +431,14 @@ __kernel void render(__global float *out, __constant scalar *params,
 
     // The passes asked for, of the pixel-centre ray like the AOVs above
     // (0 where it missed).
-    vec3 zero = v3((real)0.0f, 0.0f, 0.0f);
 #if FEATURE_PASS_P
-    vec3 hit_point = v3_select(zero, v3_add(origin, v3_scale(dir, centre.t)), centre.hit);
+    vec3 hit_point = v3_select(v3((real)0.0f, 0.0f, 0.0f), v3_add(origin, v3_scale(dir, centre.t)), centre.hit);
     store_vec3(hit_point, CHANNEL_P_X, block, pitch);
 #endif
 #if FEATURE_SHADING_PASSES
     shading_passes passes;
-    passes.diffuse = zero;
-    passes.specular = zero;
+    passes.diffuse = v3((real)0.0f, 0.0f, 0.0f);
+    passes.specular = v3((real)0.0f, 0.0f, 0.0f);
     passes.shadow = 0.0f;
     passes.occlusion = 0.0f;
     if (ANY(centre.hit))
@@ -447,10 +446,10 @@ __kernel void render(__global float *out, __constant scalar *params,
                      centre.steps, centre.hit, params, &passes);
 #endif
 #if FEATURE_PASS_DIFFUSE
-    store_vec3(v3_select(zero, passes.diffuse, centre.hit), CHANNEL_DIFFUSE_R, block, pitch);
+    store_vec3(v3_select(v3((real)0.0f, 0.0f, 0.0f), passes.diffuse, centre.hit), CHANNEL_DIFFUSE_R, block, pitch);
 #endif
 #if FEATURE_PASS_SPECULAR
-    store_vec3(v3_select(zero, passes.specular, centre.hit), CHANNEL_SPECULAR_R, block, pitch);
+    store_vec3(v3_select(v3((real)0.0f, 0.0f, 0.0f), passes.specular, centre.hit), CHANNEL_SPECULAR_R, block, pitch);
 #endif
 #if FEATURE_PASS_AO
     store_channel(TO_FLOAT(SELECT((real)0.0f, passes.occlusion, centre.hit)), CHANNEL_AO, block, pitch);
@@ -459,7 +458,7 @@ __kernel void render(__global float *out, __constant scalar *params,
     store_channel(TO_FLOAT(SELECT((real)0.0f, passes.shadow, centre.hit)), CHANNEL_SHADOW, block, pitch);
 #endif
 #if FEATURE_PASS_GLOW
-    vec3 glow = zero;   // none in a scene without glow
+    vec3 glow = v3((real)0.0f, 0.0f, 0.0f);   // none in a scene without glow
 #if FEATURE_GLOW
     glow = glow_color(centre);
 #endif
