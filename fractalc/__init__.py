@@ -2,6 +2,6 @@
 __version__ = "0.1.0"
 
 from .errors import RenderError, SceneError  # noqa: E402
-from .api import Image, Scene, load, loads  # noqa: E402
+from .api import Camera, Image, Scene, load, loads  # noqa: E402
 
-__all__ = ["load", "loads", "Scene", "Image", "SceneError", "RenderError", "__version__"]
+__all__ = ["load", "loads", "Scene", "Image", "Camera", "SceneError", "RenderError", "__version__"]

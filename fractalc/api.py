@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
-from . import __version__, run
+from . import __version__, program, run
 from .build import build, open_device
 from .check import FLOAT_MAX, RENDER_KEYS, check, check_param_values, check_value, in_float_range
 from .emit import Target, emit, uniform_source
@@ -60,6 +60,19 @@ class Image:
         floats, `compression`) or PNG (sRGB, `bits` 8 or 16, straight alpha)."""
         write(path, self.planes(), self.metadata, half=half, compression=compression, bits=bits)
 
+    def __repr__(self) -> str:
+        height, width = self.depth.shape
+        return f"<Image {width}x{height}, channels {' '.join(self.planes())}>"
+
+    def _repr_png_(self) -> bytes:
+        """Notebooks show the image: its sRGB PNG, as `save` writes it."""
+        import tempfile
+        with tempfile.TemporaryDirectory() as folder:
+            path = os.path.join(folder, "image.png")
+            self.save(path)
+            with open(path, "rb") as f:
+                return f.read()
+
 
 def image_from_pixels(pixels: np.ndarray, aovs: tuple[str, ...], metadata: dict) -> Image:
     """The Image of a render's (H, W, channels) pixels (run.CHANNELS, then
@@ -70,6 +83,32 @@ def image_from_pixels(pixels: np.ndarray, aovs: tuple[str, ...], metadata: dict)
         passes[name] = pixels[..., first:first + count]
         first += count
     return Image(pixels[..., 0:4], pixels[..., 4], pixels[..., 5:8], pixels[..., 8], metadata, passes)
+
+
+@dataclass(frozen=True)
+class Camera(program.Camera):
+    """A camera for `Scene.render(camera=...)`: the keys of a file's
+    camera block, checked as there; a mistake is a ValueError naming the
+    key. Looking straight along the default up, y is up instead."""
+
+    def __post_init__(self):
+        from .check import CAMERA_KEYS
+        for key, parameter in CAMERA_KEYS.items():
+            value = getattr(self, key)
+            if value is None:      # focus: on the target
+                continue
+            try:
+                value = check_value(parameter, key, value)
+            except ValueError as error:   # check_value speaks of render keys
+                raise ValueError(str(error).replace(" of 'render'", " of 'camera'")) from None
+            object.__setattr__(self, key, value)
+        forward = np.subtract(self.target, self.position)
+        if not np.any(forward):
+            raise ValueError("the camera's 'target' is its 'position': it looks nowhere")
+        if np.linalg.norm(np.cross(forward, self.up)) <= 1e-9 * np.linalg.norm(forward) * np.linalg.norm(self.up):
+            if self.up != program.Camera.up:
+                raise ValueError("the camera's 'up' is parallel to its view direction (target - position)")
+            object.__setattr__(self, "up", (0.0, 1.0, 0.0))
 
 
 class Scene:
@@ -88,6 +127,11 @@ class Scene:
         self._programs: dict = {}    # (compiled settings, lens, target) -> built program
         self.params = {p.name: p.default for p in checked.params}
         self.set_params(params or {})
+
+    def __repr__(self) -> str:
+        params = ", ".join(f"{k}={v:g}" for k, v in self.params.items()) or "none"
+        return (f"<Scene {self.checked.file}: params {params}; precision {self.precision}; "
+                f"device {self.device_spec or os.environ.get('FRACTALC_DEVICE') or 'default'}>")
 
     # ---- params ------------------------------------------------------------
 
