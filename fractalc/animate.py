@@ -64,13 +64,21 @@ def _stamp(file: str) -> str | None:
     return stamp
 
 
-def render_frames(scene: Scene, pattern: str, fps: float, seed: int = 0, overwrite: bool = False,
-                  progress: bool = False, **render_keys) -> tuple[list[str], int]:
-    """Render every frame of the scene's path that is not on disk yet from
-    the same scene text and settings (all of them with `overwrite`).
-    Returns the frame files, in order, and how many were rendered now. The
-    scene's params are restored afterwards."""
-    from tqdm import tqdm
+@dataclasses.dataclass(frozen=True)
+class FramePlan:
+    """An animation's frames: their files, times and settings digest, and
+    the indices of those to render now."""
+    path: object                # the scene's Path
+    times: np.ndarray
+    files: list[str]
+    settings: str               # _frame_settings
+    missing: list[int]
+
+
+def plan_frames(scene: Scene, pattern: str, fps: float, seed: int, overwrite: bool, render_keys: dict) -> FramePlan:
+    """The frames of the scene's path and which of them are not on disk yet
+    from the same scene text and settings (all of them with `overwrite`);
+    makes the frames' folder."""
     path = scene.checked.path
     if path is None:
         raise ValueError(f"{scene.checked.file} has no 'path' to animate")
@@ -79,22 +87,46 @@ def render_frames(scene: Scene, pattern: str, fps: float, seed: int = 0, overwri
     settings = _frame_settings(scene, fps, seed, render_keys)
     missing = [i for i, f in enumerate(files) if overwrite or _stamp(f) != settings]
     os.makedirs(os.path.dirname(os.path.abspath(files[0])), exist_ok=True)
+    return FramePlan(path, times, files, settings, missing)
+
+
+def render_frame(scene: Scene, path, time: float, seed: int, render_keys: dict):
+    """The frame at `time` on `path` as an Image (its params and camera
+    from the path; the scene's params are left at the frame's)."""
+    scene.set_params(params_at(path, time))
+    return scene.render(seed=seed, camera=camera_at(path, scene.checked.camera, time), **render_keys)
+
+
+def save_frame(image, plan: FramePlan, index: int) -> None:
+    """Write frame `index` atomically, stamped with its settings digest."""
+    metadata = {**image.metadata, "path.frame": str(index), "path.time": f"{float(plan.times[index]):g}",
+                SETTINGS_KEY: plan.settings}
+    dataclasses.replace(image, metadata=metadata).save(plan.files[index])
+
+
+def render_frames(scene: Scene, pattern: str, fps: float, seed: int = 0, overwrite: bool = False,
+                  progress: bool = False, cluster=None, **render_keys) -> tuple[list[str], int]:
+    """Render every frame of the scene's path that is not on disk yet from
+    the same scene text and settings (all of them with `overwrite`), here
+    or by the workers of `cluster`, a Dask client (docs/cluster.md).
+    Returns the frame files, in order, and how many were rendered now. The
+    scene's params are restored afterwards."""
+    if cluster is not None:
+        from .cluster import render_frames as render_on_cluster
+        return render_on_cluster(scene, pattern, fps, cluster, seed, overwrite, progress, **render_keys)
+    from tqdm import tqdm
+    plan = plan_frames(scene, pattern, fps, seed, overwrite, render_keys)
     original = dict(scene.params)
-    bar = tqdm(total=len(files), initial=len(files) - len(missing), unit="frame", leave=False,
+    bar = tqdm(total=len(plan.files), initial=len(plan.files) - len(plan.missing), unit="frame", leave=False,
                disable=not (progress and sys.stderr.isatty()), desc="animating")
     try:
-        for index in missing:
-            time = float(times[index])
-            scene.set_params(params_at(path, time))
-            image = scene.render(seed=seed, camera=camera_at(path, scene.checked.camera, time), **render_keys)
-            metadata = {**image.metadata, "path.frame": str(index), "path.time": f"{time:g}",
-                        SETTINGS_KEY: settings}
-            dataclasses.replace(image, metadata=metadata).save(files[index])
+        for index in plan.missing:
+            save_frame(render_frame(scene, plan.path, float(plan.times[index]), seed, render_keys), plan, index)
             bar.update(1)
     finally:
         bar.close()
         scene.set_params(original)
-    return files, len(missing)
+    return plan.files, len(plan.missing)
 
 
 def _display_pixels(file: str) -> np.ndarray:

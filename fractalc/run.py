@@ -153,6 +153,36 @@ def render(program, device: Device, frame: Frame, params, lanes: int, double: bo
     return _without_padding(image, height, width)
 
 
+def render_rows(program, device: Device, frame: Frame, params, lanes: int, double: bool,
+                first: int, count: int, channels: tuple[str, ...] = CHANNELS) -> np.ndarray:
+    """Rows `first` to `first + count - 1` of `frame` (a render farm's tile,
+    fractalc/cluster.py): a (count, W, len(channels)) float32 array, equal
+    bit for bit to those rows of `render`'s image, since a pixel's rays and
+    seed depend on its place in the whole frame, not on the launch. The
+    kernel addresses the whole image, so the device buffer spans the rows
+    above the tile too; only the tile's rows are written and read back
+    (on CPUs the others are never touched, so they take no memory)."""
+    import pyopencl as cl
+    kernel = cl.Kernel(program, "render")
+    block_width, block_height = lane_block(lanes)
+    group = device.work_group
+    step_x, step_y = (block_width * group[0], block_height * group[1]) if group else (block_width, block_height)
+    pitch = _round_up(frame.width, step_x)
+    top, bottom = first // step_y * step_y, _round_up(first + count, step_y)   # whole blocks
+    launch_width = _round_up(min(TILE_WIDTH, pitch), step_x)
+    tile = np.empty((bottom - top, pitch, len(channels)), dtype=np.float32)
+    with _guard("rendering"):
+        params_buffer = _constant_buffer(device, params, double)
+        camera_buffer = _constant_buffer(device, frame.camera, double)
+        out = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY, bottom * pitch * len(channels) * 4)
+        for x0 in range(0, pitch, launch_width):
+            kernel(device.queue, (min(launch_width, pitch - x0) // block_width, (bottom - top) // block_height),
+                   group, out, params_buffer, camera_buffer, np.int32(frame.width), np.int32(frame.height),
+                   np.int32(x0), np.int32(top), np.int32(pitch), np.int32(frame.samples), np.uint32(frame.seed))
+        cl.enqueue_copy(device.queue, tile, out, src_offset=top * pitch * len(channels) * 4, is_blocking=True)
+    return np.ascontiguousarray(tile[first - top:first - top + count, :frame.width])
+
+
 def _without_padding(image: np.ndarray, height: int, width: int) -> np.ndarray:
     """The top-left height x width pixels of `image` as one contiguous
     array in the same memory (a writer takes it as it is): rows are moved
