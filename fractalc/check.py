@@ -8,6 +8,7 @@ checks accept silently, so one mistake gives one message.
 from __future__ import annotations
 
 import difflib
+import itertools
 import math
 from dataclasses import dataclass, replace
 
@@ -33,10 +34,16 @@ class Value:
 _ERROR = Value("error", None)
 
 # Parts (primitives, transforms, combinations) a scene may have, counting a
-# let each time it is used: generated scenes have thousands of shapes, each
-# translated and coloured. The kernel's build time grows faster than its
-# size: about 1000 s for a union of 10000 spheres on 2 cores.
-MAX_SHAPES = 50_000
+# let each time it is used. The kernel's build time grows faster than its
+# size: on 2 cores, a union of 1000 translated spheres (2001 parts) takes
+# 11 s to build and render once, 2000 spheres 30 s, 4000 spheres 73 s
+# (benchmarks/scene_size.py; 10000 spheres took 17 minutes).
+MAX_SHAPES = 6000
+# The hit threshold's largest multiple: normals are differences over that
+# step, which beyond it can pass float's range on the scene (NaN normals).
+MAX_EPSILON_SCALE = 1000
+# Errors that get a "did you mean" (each costs time in the number of known names)
+SUGGESTED_ERRORS = 10
 # The largest float: a number beyond it is infinite in a float kernel
 FLOAT_MAX = 3.4028234663852886e38
 
@@ -271,10 +278,18 @@ class _Checker:
         return Value(WORD, e.name)
 
     def unknown_name(self, span: Span, name: str) -> None:
-        known = list(self.params) + list(self.lets) + list(self.material_decls)
-        close = difflib.get_close_matches(name, known, n=1)
-        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        hint = self.did_you_mean(name, self.params, self.lets, self.material_decls)
         self.fail(span, f"unknown name '{name}'{hint}")
+
+    def did_you_mean(self, name: str, *known) -> str:
+        """' (did you mean 'x'?)' naming the name in `known` (collections
+        of names) closest to `name`, or ''. Its cost grows with the known
+        names, so only the first SUGGESTED_ERRORS errors get one: a file of
+        thousands of unknown names stays linear."""
+        if len(self.errors) >= SUGGESTED_ERRORS:
+            return ""
+        close = difflib.get_close_matches(name, itertools.chain(*known), n=1)
+        return f" (did you mean '{close[0]}'?)" if close else ""
 
     def value_of(self, e: ast.Expr) -> Value:
         """Evaluate an expression that must be a value (not a bare word)."""
@@ -367,8 +382,7 @@ class _Checker:
             if value.type == WORD and want != "material":
                 self.unknown_name(span, value.data)
             if value.type == WORD:
-                close = difflib.get_close_matches(value.data, list(self.material_decls), n=1)
-                hint = f" (did you mean '{close[0]}'?)" if close else ""
+                hint = self.did_you_mean(value.data, self.material_decls)
                 self.fail(span, f"unknown material '{value.data}'{hint}")
             self.fail(span, f"'{param.name}' of '{owner}' needs {word}, this is {_TYPE_WORDS[value.type]}")
         data = value.data
@@ -450,9 +464,7 @@ class _Checker:
             return Value(COLORING, Coloring(near, far, trap, scale))
         signature = self.library.signatures.get(name)
         if signature is None:
-            known = list(self.library.signatures) + list(COMBINATORS) + list(MATH) + list(COLORINGS)
-            close = difflib.get_close_matches(name, known, n=1)
-            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            hint = self.did_you_mean(name, self.library.signatures, COMBINATORS, MATH, COLORINGS)
             self.fail(e.name_span, f"unknown function '{name}'{hint}")
         return self.shape(Primitive(signature, self.bound_args(e, signature, e.args), e.span))
 
@@ -503,9 +515,7 @@ class _Checker:
             raise _Failed
         signature = TRANSFORMS.get(e.name)
         if signature is None:
-            close = difflib.get_close_matches(e.name, list(TRANSFORMS), n=1)
-            hint = f" (did you mean '{close[0]}'?)" if close else ""
-            self.fail(e.name_span, f"unknown transform '.{e.name}'{hint}")
+            self.fail(e.name_span, f"unknown transform '.{e.name}'{self.did_you_mean(e.name, TRANSFORMS)}")
         if receiver.type != SHAPE:
             self.fail(e.name_span, f"'.{e.name}' transforms a shape, this is {_TYPE_WORDS[receiver.type]}")
         args = self.bound_args(e, signature, e.args)
@@ -522,13 +532,18 @@ class _Checker:
     def shape(self, shape: Shape) -> Value:
         """A shape value, counted: the kernel computes every part of the
         shape with each let expanded where it is used, so a let used twice
-        in each of a chain of lets doubles it each time."""
+        in each of a chain of lets doubles it each time. Too many parts is
+        an error at the part that passes the limit."""
         parts = shape.shapes if isinstance(shape, Combination) else \
             () if isinstance(shape, Primitive) else (shape.shape,)
-        size = 1 + sum(self.shape_sizes[id(p)][1] for p in parts)
-        if size > MAX_SHAPES:
-            self.fail(shape.span, f"this shape has {size} parts (primitives, transforms, combinations) once "
-                                  f"its lets are expanded, more than the {MAX_SHAPES} a scene may have")
+        size = 1
+        for part in parts:
+            size += self.shape_sizes[id(part)][1]
+            if size > MAX_SHAPES:
+                self.fail(part.span if len(parts) > 1 else shape.span,
+                          f"the scene passes {MAX_SHAPES} parts (primitives, transforms, combinations, "
+                          f"with each let counted where it is used) here: it would take minutes to compile. "
+                          f"Repeat a regular array of copies with '.repeat(period)', or use fewer shapes")
         self.shape_sizes[id(shape)] = (shape, size)   # the shape kept alive: ids stay unique
         return Value(SHAPE, shape)
 
@@ -555,8 +570,8 @@ class _Checker:
             spans[entry.key] = entry.key_span
             param = keys.get(entry.key)
             if param is None:
-                close = difflib.get_close_matches(entry.key, list(keys), n=1)
-                hint = f" (did you mean '{close[0]}'?)" if close else f" (known: {', '.join(keys)})"
+                hint = self.did_you_mean(entry.key, keys) or \
+                    (f" (known: {', '.join(keys)})" if len(keys) <= len(RENDER_KEYS) else "")
                 self.error(entry.key_span, f"'{owner}' has no key '{entry.key}'{hint}")
                 continue
             nested = BLOCK_KEYS.get(param.type)
@@ -761,7 +776,8 @@ RENDER_KEYS = _keys(
     _P("precision", "word:float|double"), _P("reflections", "int", None, "0..16"),
     _P("glow", "block:glow"), _P("fog", "block:fog"), _P("slice", "block:slice"),
     _P("ao_method", "word:normal|steps"), _P("dither", "num", None, "0..1"),
-    _P("overrelax", "num", None, "1..1.99"), _P("epsilon_scale", "num", None, ">0"),
+    _P("overrelax", "num", None, "1..1.99"),
+    _P("epsilon_scale", "num", None, ">0", f"<={MAX_EPSILON_SCALE:g}"),
     _P("normals", "word:tetrahedral|central"), _P("fast_math", "word:auto|on|off"))
 
 

@@ -23,6 +23,18 @@ POINT = ir.Var("p", ir.VEC3)
 # hit only where the threshold exceeds the radius: a fractal under a pixel.
 BOUND_MARGIN = 1.0
 
+# Where a transform can carry a point past float's range (a translate by
+# more than this, a scale by a factor below 1, either by a param), the moved
+# point's coordinates are clamped to +-MAX_COORDINATE: beyond ~1.8e19 a
+# shape's squared length overflows to +inf, and a warp's angle to NaN.
+# Projecting onto a box that holds the shape moves no point farther from it,
+# so the estimate stays a lower bound, finite (issue 10).
+MAX_COORDINATE = 1e18
+# Twist and bend rates act as at most this many radians per unit: at unit
+# distance float resolves such an angle to 0.06 rad, and beyond it rate x
+# coordinate overflows to an infinite angle (a NaN point).
+MAX_WARP_RATE = 1e6
+
 Point = tuple[ir.Expr, ir.Expr, ir.Expr]
 
 
@@ -95,6 +107,14 @@ def _repeated(point: Point, period: ir.Vec) -> Point:
         wrapped = ir.sub(p, ir.mul(c, ir.op("round", ir.div(p, c))))
         return ir.op("select", ir.op("lt", ir.const(0.0), c), wrapped, p)
     return tuple(axis(p, c) for p, c in zip(point, period.items))
+
+
+def _clamped(point: Point) -> Point:
+    return tuple(ir.op("clamp", c, ir.const(-MAX_COORDINATE), ir.const(MAX_COORDINATE)) for c in point)
+
+
+def _warp_rate(rate: ir.Expr) -> ir.Expr:
+    return ir.op("clamp", rate, ir.const(-MAX_WARP_RATE), ir.const(MAX_WARP_RATE))
 
 
 def _plain(s: Combination) -> bool:
@@ -212,15 +232,18 @@ class _Lowerer:
         """The point at which the transformed shape's field is read."""
         kind, args = s.kind, s.args
         if kind == "translate":
-            return tuple(ir.sub(p, v) for p, v in zip(point, args[0].items))
+            moved = tuple(ir.sub(p, v) for p, v in zip(point, args[0].items))
+            far = any(not ir.is_const(v) or abs(v.value) > MAX_COORDINATE for v in args[0].items)
+            return _clamped(moved) if far else moved
         if kind == "rotate":
             return _rotated(point, args[0], args[1])
         if kind == "repeat":
             return _repeated(point, args[0])
         if kind == "scale":
-            return tuple(ir.div(p, args[0]) for p in point)
+            moved = tuple(ir.div(p, args[0]) for p in point)
+            return moved if ir.is_const(args[0]) and args[0].value >= 1.0 else _clamped(moved)
         if kind in ("twist", "bend"):
-            return ir.components(ir.call(f"{kind}_point", (ir.Vec(point), args[0]), ir.VEC3))
+            return ir.components(ir.call(f"{kind}_point", (ir.Vec(point), _warp_rate(args[0])), ir.VEC3))
         return point
 
     @staticmethod
@@ -233,7 +256,7 @@ class _Lowerer:
         if kind == "scale":
             return ir.mul(d, args[0]), surface
         if kind in ("twist", "bend"):
-            return ir.div(d, ir.call(f"{kind}_lipschitz", (ir.Vec(point), args[0]))), surface
+            return ir.div(d, ir.call(f"{kind}_lipschitz", (ir.Vec(point), _warp_rate(args[0])))), surface
         if kind == "round":
             return ir.sub(d, args[0]), surface
         if kind == "onion":

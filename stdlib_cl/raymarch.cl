@@ -419,6 +419,9 @@ __kernel void render(__global float *out, __constant scalar *params,
         coverage = coverage * (real)(1.0f / (scalar)samples);
     }
 
+    // glow, fog and background colours are bounded only below: their sums
+    // may pass float's range (inf, or NaN where one meets 0); pixels stay finite
+    color = v3(fmin(color.x, (real)FLT_MAX), fmin(color.y, (real)FLT_MAX), fmin(color.z, (real)FLT_MAX));
     __global float *block = out + (block_y * pitch + block_x) * CHANNELS;
     real depth = SELECT((real)INFINITY, centre.t, centre.hit);
     store_channel(TO_FLOAT(color.x), CHANNEL_R, block, pitch);

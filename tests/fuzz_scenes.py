@@ -106,7 +106,7 @@ RENDER_KEYS = {
     "max_steps": ("int", _cheap(1, 200, 100000)), "max_distance": ("num", POSITIVE),
     "ao": ("num", UNIT), "samples": ("int", _cheap(1, 4, 4096)), "background": ("vec3", NON_NEGATIVE),
     "reflections": ("int", _cheap(0, 2, 16)), "dither": ("num", UNIT),
-    "overrelax": ("num", Range(1, 1.99)), "epsilon_scale": ("num", POSITIVE),
+    "overrelax": ("num", Range(1, 1.99)), "epsilon_scale": ("num", Range(0, 1000, lo_open=True)),
 }
 RENDER_WORDS = {"precision": ("float", "double"), "ao_method": ("normal", "steps"),
                 "normals": ("tetrahedral", "central"), "fast_math": ("auto", "on", "off")}

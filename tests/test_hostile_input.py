@@ -156,7 +156,20 @@ def test_lets_that_double_the_scene_each_time_are_a_located_error(tmp_path, caps
     lines = ["let s0 = sphere(0.1)"] + [f"let s{i} = union(s{i - 1}, s{i - 1}.translate((0.1, 0, 0)))"
                                         for i in range(1, 40)]
     printed = _check_errors("\n".join(lines) + "\nscene s39\n", tmp_path, capsys)
-    assert ":16:11: error: this shape has 98302 parts" in printed
+    assert ":12:22: error: the scene passes 6000 parts" in printed   # s11's second part: 6142
+
+
+def test_a_union_too_large_to_compile_is_refused_at_the_shape_that_passes_the_limit(tmp_path, capsys):
+    """Item 4: 2999 translated spheres (5999 parts) check; the 3000th is
+    refused where it stands, saying why and what to use instead."""
+    from fractalc.check import MAX_SHAPES
+    shapes = [f"sphere(0.05).translate(({i}, 0, 0))" for i in range((MAX_SHAPES - 1) // 2 + 1)]
+    fractalc.loads(f"scene union({', '.join(shapes[:-1])})")
+    text = f"scene union({', '.join(shapes)})\n"
+    printed = _check_errors(text, tmp_path, capsys)
+    column = text.index(shapes[-1]) + 1
+    assert f":1:{column}: error: the scene passes {MAX_SHAPES} parts" in printed
+    assert "minutes to compile" in printed and "'.repeat(period)'" in printed
 
 
 # ---- numbers that overflow -------------------------------------------------
@@ -240,6 +253,75 @@ def test_lights_bright_enough_to_overflow_give_finite_pixels(precision):
     image = fractalc.loads(text, precision=precision).render(width=16, height=12)
     assert np.isfinite(image.depth).any() and np.isfinite(image.rgba).all()
     assert image.rgba[..., :3].max() > 1e10       # still as bright as it can be
+
+
+FAR = np.array([[0.0, 0, 0], [0.3, -0.2, 0.5], [1.1, 0, 0], [-2, 3, 1], [50, -40, 30], [1e4, 1e4, -1e4]])
+
+
+@pytest.mark.parametrize("precision", ["float", "double"])
+@pytest.mark.parametrize("shape", [
+    "sphere().scale(1e-30)", "sphere(1e29).scale(1e-30).translate((0, 0, 2))",
+    "cylinder().translate((0, 0, 1e20))", "sphere().translate((0, 0, 1e30))",
+    "sphere().translate((0, 0, -3e38)).translate((0, 0, 3e38))",
+    "julia().scale(1e-30).twist(1.11)", "sphere().twist(3e38)", "box(1).bend(-1e30)",
+    "intersect(box(0.5).scale(1e-30).twist(1e30).scale(1e29), sphere(1))",
+])
+def test_tiny_scales_far_offsets_and_huge_warp_rates_give_finite_distances(shape, precision):
+    """Item 1 (fuzz finding 6): a moved point that would pass float's range
+    is clamped, a warp's rate too; distances stay finite and images too."""
+    scene = fractalc.loads(f"scene {shape}\ncamera {{ position: (0, -6, 2), target: (0, 0, 0) }}",
+                           precision=precision)
+    assert np.isfinite(scene.distance(FAR)).all()
+    image = scene.render(width=16, height=12)
+    assert np.isfinite(image.rgba).all() and np.isfinite(image.normal).all()
+    assert ((image.depth >= 0) | (image.depth == np.inf)).all()
+
+
+def test_clamping_a_far_point_keeps_the_estimate_a_lower_bound():
+    """Item 1: a sphere 1.2e21 away in double: the clamped estimate (1e18
+    at most) is finite and below the true distance; near it, exact."""
+    far = 2.0 ** 70          # 1.2e21, and points near it that double holds exactly
+    scene = fractalc.loads(f"scene sphere(1).translate((0, 0, {far:.0f}))", precision="double")
+    d = scene.distance(np.array([[0.0, 0, 0], [0, 0, far - 2.0 ** 19]]))
+    assert 1e17 < d[0] <= far - 1
+    assert d[1] == 2.0 ** 19 - 1
+
+
+def test_epsilon_scale_beyond_its_limit_is_a_located_error(tmp_path, capsys):
+    """Item 1 (fuzz finding 7): a threshold of 1e30 pixels gave NaN normals."""
+    printed = _check_errors("scene sphere()\nrender { epsilon_scale: 1e30 }\n", tmp_path, capsys)
+    assert ":2:25: error: 'epsilon_scale' of 'render' must be at most 1000" in printed
+    image = fractalc.loads("scene sphere()\nrender { epsilon_scale: 1000 }").render(width=16, height=12)
+    assert np.isfinite(image.normal).all() and np.isfinite(image.depth).any()
+
+
+@pytest.mark.parametrize("precision", ["float", "double"])
+def test_huge_glow_fog_and_background_colours_give_finite_pixels(precision):
+    """Item 2: colours bounded only below sum past float's range."""
+    text = "\n".join(["scene sphere(1)", "render {", "  background: (3e38, 3e38, 0), samples: 4,",
+                      "  glow: { color: (3e38, 1, 3e38), strength: 3e38, radius: 1 },",
+                      "  fog: { color: (3e38, 3e38, 3e38), density: 0.1 }", "}"])
+    image = fractalc.loads(text, precision=precision).render(width=16, height=12)
+    assert np.isfinite(image.rgba).all() and np.isfinite(image.depth).any()
+    assert image.rgba[..., :3].max() > 1e38       # still as bright as float goes
+
+
+def test_many_unknown_names_get_few_suggestions(monkeypatch):
+    """Item 3: each "did you mean" compares against every known name; only
+    the first errors get one, so 1000 unknown names cost linear time."""
+    import difflib
+
+    from fractalc import check
+    calls = []
+    original = difflib.get_close_matches
+    monkeypatch.setattr(difflib, "get_close_matches", lambda *a, **k: calls.append(a[0]) or original(*a, **k))
+    text = "\n".join(f"let value_{i} = 1\nlet x_{i} = valu_{i}" for i in range(1000)) + "\nscene sphere()"
+    with pytest.raises(fractalc.SceneError) as error:
+        fractalc.loads(text)
+    messages = [d.message for d in error.value.errors]
+    assert len(messages) == 1000 and len(calls) == check.SUGGESTED_ERRORS
+    assert messages[0] == "unknown name 'valu_0' (did you mean 'value_0'?)"
+    assert messages[-1] == "unknown name 'valu_999'"
 
 
 # ---- the user's text in generated source and names -------------------------
