@@ -212,6 +212,12 @@ class Scene:
         self._programs[key] = build(source, self.device, use_cache=use_cache)
         return self._programs[key], target
 
+    def set_defaults(self, camera: Camera | None = None, **render_keys) -> None:
+        """Replace the file's camera and render settings (any render key,
+        checked as `render` checks it) for every later render."""
+        self.checked = replace(self.checked, render=self._settings(render_keys),
+                               camera=camera or self.checked.camera)
+
     def _settings(self, overrides: dict) -> RenderSettings:
         settings = self.checked.render
         names = {f.name for f in fields(RenderSettings)}

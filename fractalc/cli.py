@@ -76,12 +76,64 @@ def _passes(text: str) -> list[str]:
     return names
 
 
+def _key_value(text: str):
+    """A --render or --camera value: numbers, a vector (x,y,z), or a word."""
+    parts = [part.strip() for part in text.strip().strip("()").split(",")]
+    try:
+        numbers = tuple(float(part) for part in parts)
+    except ValueError:
+        return text.strip()
+    return numbers if len(numbers) > 1 else numbers[0]
+
+
+def _keys_given(args) -> tuple[dict, dict]:
+    """--render and --camera KEY=VALUE items, each checked as in a file's
+    block (before any work): (render keys, camera keys). A block key is
+    given by its parts (`--render fog.density=0.2`) or turned off (`fog=off`)."""
+    from .check import BLOCK_KEYS, CAMERA_KEYS, RENDER_KEYS, check_value
+    found = {"--render": {}, "--camera": {}}
+    for option, keys, items in (("--render", RENDER_KEYS, args.render), ("--camera", CAMERA_KEYS, args.camera)):
+        owner = option[2:]
+        for item in items or ():
+            key, sep, text = (part.strip() for part in item.partition("="))
+            name, _, part = key.partition(".")
+            if not sep or not key:
+                raise UsageError(f"{option} takes KEY=VALUE, not '{item}'")
+            if name not in keys:
+                raise UsageError(f"{option} {item}: '{owner}' has no key '{name}' (known: {', '.join(keys)})")
+            value = _key_value(text)
+            try:
+                if keys[name].type in BLOCK_KEYS:
+                    block = found[option].get(name) or {}
+                    value = False if value == "off" else {**block, **({part: value} if part else {})}
+                check_value(keys[name], name, value)
+            except ValueError as error:
+                raise UsageError(f"{option} {item}: {str(error).replace(' of ' + repr('render'), ' of ' + repr(owner))}") from None
+            found[option][name] = value
+    return found["--render"], found["--camera"]
+
+
+def _configure(scene, keys: tuple[dict, dict]) -> None:
+    """Make the --render and --camera keys the scene's own."""
+    from dataclasses import asdict
+    from .api import Camera
+    render, camera = keys
+    try:
+        scene.set_defaults(Camera(**{**asdict(scene.checked.camera), **camera}) if camera else None, **render)
+    except ValueError as error:    # keys wrong together: the camera looks nowhere
+        raise UsageError(f"--camera: {error}") from None
+
+
 def _load(args):
     from .api import loads
     text = _require_file(args.scene)
     params = _parse_set(getattr(args, "set", None))
-    return loads(text, params=params, precision=getattr(args, "precision", None),
-                 device=getattr(args, "device", None), path=args.scene)
+    keys = _keys_given(args) if hasattr(args, "render") else None
+    scene = loads(text, params=params, precision=getattr(args, "precision", None),
+                  device=getattr(args, "device", None), path=args.scene)
+    if keys:
+        _configure(scene, keys)
+    return scene
 
 
 def _write_text_atomically(path: str, text: str) -> None:
@@ -229,10 +281,13 @@ def command_view(args) -> int:
                       ("--preview-scale", args.preview_scale), ("--max-samples", args.max_samples),
                       ("--benchmark", args.benchmark))
     _require_file(args.scene)
+    keys = _keys_given(args)
     from .view import Viewer, measure, show
     viewer = Viewer(args.scene, args.width, args.height, params=_parse_set(args.set),
                     precision=args.precision, device=args.device, preview_scale=args.preview_scale,
                     max_samples=args.max_samples, output_dir=args.output_dir)
+    _configure(viewer.scene, keys)     # the file's own keys come back when it is edited and reloaded
+    viewer.look_from(viewer.scene.checked.camera)
     if args.benchmark:
         fps = measure(viewer, args.benchmark)
         print(f"{args.scene}: {fps:.1f} FPS while moving ({args.benchmark} frames at "
@@ -344,7 +399,15 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--verbose", action="store_true",
                        help="show the OpenCL compiler's warnings (also $FRACTALC_VERBOSE=1)")
 
+    def key_options(p):
+        p.add_argument("--render", action="append", metavar="KEY=VALUE",
+                       help="a render key as in the file's render block (repeatable): ao=0.5, "
+                            "max_steps=512, background=0,0,0, fog.density=0.1, glow=off")
+        p.add_argument("--camera", action="append", metavar="KEY=VALUE",
+                       help="a camera key (repeatable): fov=30, position=1,2,3")
+
     def image_options(p):
+        key_options(p)
         p.add_argument("--width", type=int)
         p.add_argument("--height", type=int)
         p.add_argument("--samples", type=int, help="anti-aliasing samples per pixel")
@@ -413,6 +476,7 @@ def _parser() -> argparse.ArgumentParser:
     bench_.add_argument("--plot", metavar="FILE.png", help="with --sweep: also plot time against error "
                                                           "(needs matplotlib)")
     bench_.add_argument("--no-cache", action="store_true", help="compile the kernel even if it is cached")
+    key_options(bench_)
     device_options(bench_)
     bench_.set_defaults(run=command_bench)
 
@@ -432,6 +496,7 @@ def _parser() -> argparse.ArgumentParser:
     view.add_argument("--benchmark", type=int, metavar="FRAMES",
                       help="orbit the camera for FRAMES frames, print the frame rate and exit "
                            "(SDL_VIDEODRIVER=dummy runs it without a display)")
+    key_options(view)
     device_options(view)
     view.set_defaults(run=command_view)
 
