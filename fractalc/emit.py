@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 from . import __version__, ir
 from .lower import POINT, SceneIR
+from .schedule import ForBlock, Hoist, IfBlock, schedule, varying
 from .passes import PASSES, channels
 from .program import Light
 from .stdlib import library
@@ -56,96 +57,61 @@ MAX_INLINE_DEPTH = 32
 
 
 class _FunctionWriter:
-    """Writes one C function computing IR expressions of the point.
+    """Writes one C function computing IR expressions of the point: renders
+    the blocks that `schedule` orders.
 
-    Scheduling: statements come in dependency order; a Loop is a `for`
-    block whose body sees its States as the loop's variables and whose
-    loop-invariant values are computed once before it; a Branch is an `if`
-    block computing its `then` side only for the rays that need it. Values
-    computed inside a block are out of scope after it.
-
-    Rendering: nodes used more than once, library calls and expressions
-    nested deeper than MAX_INLINE_DEPTH get a named temporary, the rest is
-    inlined. A node is uniform where it depends on params and constants
-    only: it is computed as a `scalar` (or `int`). Everything else (the
-    point, library calls, loop and branch results) is per ray; a per-ray
-    node's uniform arguments are widened where C's overloads need one type."""
+    Nodes used more than once, library calls and expressions nested deeper
+    than MAX_INLINE_DEPTH get a named temporary, the rest is inlined. A node
+    is uniform where it depends on params and constants only: it is
+    computed as a `scalar` (or `int`). Everything else (the point, library
+    calls, loop and branch results) is per ray; a per-ray node's uniform
+    arguments are widened where C's overloads need one type. Inside a loop,
+    a per-ray branch runs only for the rays still iterating."""
 
     def __init__(self, root: ir.Expr):
         self.root = root
-        self.nodes = ir.walk(root)
         self.uses: dict = {}
-        for node in self.nodes:
+        for node in ir.walk(root):
             for child in ir.children(node):
                 self.uses[child] = self.uses.get(child, 0) + 1
-        self.varying = set()
-        for node in self.nodes:
-            # loops and branches run per ray (their rays stop or choose apart)
-            if isinstance(node, (ir.Var, ir.Call, ir.State, ir.Loop, ir.Branch, ir.Out)) \
-                    or any(c in self.varying for c in ir.children(node)):
-                self.varying.add(node)
-        self.levels = ir.state_levels((root,))   # the loop levels whose States a node depends on
+        self.varying = varying((root,))
         self.text: dict = {}
         self.depth: dict = {}      # how deeply a node's inlined text nests
         self.active: list = []     # the active masks of the loops being written (None: no condition)
         self.lines: list[str] = []
         self.counts: dict[str, int] = {}
 
-    # ---- scheduling ------------------------------------------------------------
-
-    @staticmethod
-    def _outside(node) -> tuple:
-        """What must be computed before a node in its own block: for a Loop
-        its start and count (its body runs inside the loop), for a Branch
-        its condition and, for a per-ray condition, its `otherwise`."""
-        if isinstance(node, ir.Loop):
-            return (*node.init, node.count)
-        if isinstance(node, ir.Branch):
-            return (node.condition,)
-        return ir.children(node)
-
     def block(self, roots, indent: str) -> None:
-        """Emit the statements computing `roots` (a node or a tuple)."""
-        roots = roots if isinstance(roots, tuple) else (roots,)
-        for root in roots:
-            for node in ir.walk(root, self._dependencies):
-                if node in self.text:
-                    continue
-                if isinstance(node, ir.Loop):
-                    self.loop(node, indent)
-                elif isinstance(node, ir.Branch):
-                    self.branch(node, indent)
-                elif isinstance(node, ir.Out):
-                    self.text[node] = self.text[node.source][node.index]
+        """Write the statements computing `roots` (a node or a tuple)."""
+        self.statements(schedule(roots if isinstance(roots, tuple) else (roots,)), indent)
+
+    def statements(self, statements, indent: str) -> None:
+        for statement in statements:
+            if isinstance(statement, ForBlock):
+                self.loop(statement, indent)
+            elif isinstance(statement, IfBlock):
+                self.branch(statement, indent)
+            elif isinstance(statement, Hoist):
+                node = statement.node
+                if not self.trivial(node) and self.depth[node]:
+                    self.text[node] = self.declare(self.c_type(node), self.text[node], indent)
                     self.depth[node] = 0
-                else:
-                    self.value(node, indent)
+            elif isinstance(statement.node, ir.Out):
+                self.text[statement.node] = self.text[statement.node.source][statement.node.index]
+                self.depth[statement.node] = 0
+            else:
+                self.value(statement.node, indent)
 
-    def _dependencies(self, node) -> tuple:
-        if isinstance(node, ir.Branch) and node.condition in self.varying:
-            return (node.condition, *node.otherwise)
-        return self._outside(node)
-
-    def value(self, node, indent: str, hoisted: bool = False) -> None:
-        if isinstance(node, ir.State):
-            raise ValueError(f"{node!r} used outside its loop")
+    def value(self, node, indent: str) -> None:
         text = self.expression(node)
         self.depth[node] = 1 + max((self.depth.get(c, 0) for c in ir.children(node)), default=0)
-        if (self.named(node) or (hoisted and not self.trivial(node))) and node is not self.root:
+        if self.named(node) and node is not self.root:
             text = self.declare(self.c_type(node), text, indent)
             self.depth[node] = 0
         self.text[node] = text
 
-    def loop(self, node: ir.Loop, indent: str) -> None:
-        body = (*node.next, *(() if node.condition is None else (node.condition,)))
-        # loop-invariant values of the body: once, before the loop
-        for inner in (n for root in body for n in ir.walk(root, self._dependencies)):
-            if node.level not in self.levels[inner] and inner not in self.text \
-                    and not isinstance(inner, (ir.Loop, ir.Branch, ir.Out)):
-                self.block(inner, indent)
-                if not self.trivial(inner) and inner in self.text and self.depth[inner]:
-                    self.text[inner] = self.declare(self.c_type(inner), self.text[inner], indent)
-                    self.depth[inner] = 0
+    def loop(self, block: ForBlock, indent: str) -> None:
+        node = block.loop
         names = [self.declare(_C_TYPES[e.type], self.argument(e), indent, "s") for e in node.init]
         counter = self.fresh("i")
         count = str(int(node.count.value)) if ir.is_const(node.count) else f"(int){self.text[node.count]}"
@@ -158,11 +124,11 @@ class _FunctionWriter:
             self.text[ir.State(node.level, i, e.type)] = names[i]
             self.depth[ir.State(node.level, i, e.type)] = 0
         if active is not None:
-            self.block(node.condition, inside)
+            self.statements(block.condition, inside)
             self.lines += [f"{inside}{active} = {active} & {self.text[node.condition]};",
                            f"{inside}if (!ANY({active})) break;"]
         self.active.append(active)
-        self.block(node.next, inside)
+        self.statements(block.body, inside)
         self.active.pop()
         updates = [self.declare(_C_TYPES[e.type], self.argument(e), inside, "n") for e in node.next]
         for name, update in zip(names, updates):
@@ -173,7 +139,8 @@ class _FunctionWriter:
         self.text[node] = names
         self.depth[node] = 0
 
-    def branch(self, node: ir.Branch, indent: str) -> None:
+    def branch(self, block: IfBlock, indent: str) -> None:
+        node = block.branch
         inside, outside = indent + "    ", dict(self.text)
         types = [_C_TYPES[e.type] for e in node.then]
         condition = self.text[node.condition]
@@ -186,18 +153,18 @@ class _FunctionWriter:
             if self.depth[node.condition] or stopped:
                 condition = self.declare("mask", condition, indent)
             self.lines.append(f"{indent}if (ANY({condition})) {{")
-            self.block(node.then, inside)
+            self.statements(block.then, inside)
             self.lines += [f"{inside}{name} = SELECT({name}, {self.argument(e)}, {condition});"
                            for name, e in zip(names, node.then)]
         else:
             names = [self.fresh("b") for _ in types]
             self.lines += [f"{indent}{t} {name};" for t, name in zip(types, names)]
             self.lines.append(f"{indent}if ({condition}) {{")
-            self.block(node.then, inside)
+            self.statements(block.then, inside)
             self.lines += [f"{inside}{name} = {self.argument(e)};" for name, e in zip(names, node.then)]
             self.text = dict(outside)
             self.lines.append(f"{indent}}} else {{")
-            self.block(node.otherwise, inside)
+            self.statements(block.otherwise, inside)
             self.lines += [f"{inside}{name} = {self.argument(e)};" for name, e in zip(names, node.otherwise)]
         self.lines.append(f"{indent}}}")
         self.text = outside
