@@ -2,7 +2,9 @@
 Transformer to `ast` nodes, so that no step recurses on the input's depth."""
 from __future__ import annotations
 
+import gc
 import re
+from bisect import bisect_right
 from functools import lru_cache
 
 from lark import Lark, Token, Transformer_NonRecursive, Tree, v_args
@@ -228,25 +230,359 @@ def _syntax_message(error: UnexpectedInput) -> str:
     return f"unexpected {_describe(token)}, expected {_expected_words(expected)}"
 
 
+# ---- the fast parser ---------------------------------------------------------
+
+class _Stop(Exception):
+    """The fast parser met a token it does not take: Lark decides."""
+
+
+# Lark's tokens (see grammar/frac.lark): skipped space and comments, then a
+# name, a number, a punctuation mark or a new line; group 4 is the end of the
+# text and group 5 any other character (an error).
+_FAST_TOKEN = re.compile(r"(?:[ \t\r\f]+|#[^\n]*)*(?:([A-Za-z_][A-Za-z0-9_]*)|((?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)"
+                         r"|([-+*/|&(){}\[\],:=.\n])|(\Z)|(.))", re.S)
+_DECL_WORDS = frozenset({"param", "let", "material", "scene", "camera", "light", "render", "path"})
+_PRECEDENCE = {"|": 1, "&": 2, "+": 3, "-": 3, "*": 4, "/": 4}
+_SEPARATORS = frozenset({",", "\n"})
+# The fast parser hands anything this deep to Lark, which reports the
+# nesting limit exactly where it is passed.
+_FAST_DEPTH = MAX_NESTING - 8
+
+
+def _tokens(source: str) -> tuple[list, list, list, list]:
+    """Kinds ("name", "number", the punctuation itself, "\n", "" at the end,
+    "?" for a character no token starts with), texts and start offsets of
+    the tokens of `source`, and the offsets where its lines start. New lines
+    are kept only directly inside `{ }` and once, as `_BlockNewlines` does."""
+    kinds, texts, starts, line_starts, open_brackets = [], [], [], [0], []
+    for match in _FAST_TOKEN.finditer(source):
+        group = match.lastindex
+        if group == 3:
+            kind = text = match.group(3)
+            if kind == "\n":
+                line_starts.append(match.end())
+                if not open_brackets or open_brackets[-1] != "{" or kinds[-1] == "\n":
+                    continue
+            elif kind in "([{":
+                open_brackets.append(kind)
+            elif kind in ")]}" and open_brackets:
+                open_brackets.pop()
+        elif group == 1:
+            kind, text = "name", match.group(1)
+        elif group == 2:
+            kind, text = "number", match.group(2)
+        else:
+            kinds.append("" if group == 4 else "?")
+            texts.append("")
+            starts.append(match.start(group))
+            break
+        kinds.append(kind)
+        texts.append(text)
+        starts.append(match.start(group))
+    return kinds, texts, starts, line_starts
+
+
+class _FastParser:
+    """A recursive-descent parser of the grammar in grammar/frac.lark that
+    builds the AST as it reads, with Lark's spans (a node's span runs from
+    its first to its last token, brackets around a whole operand left out).
+    It takes only input Lark takes, and stops (`_Stop`) at anything else:
+    a mistake, nesting near the limit, a keyword run into a name."""
+
+    def __init__(self, source: str):
+        self.source = source
+        self.decl_starts: list[int] = []   # offsets of the declarations begun
+        self.level = 0                     # open brackets and unary minuses, as _BlockNewlines counts
+        self.depth = 0                     # of the expression read last, as _DepthTree counts
+        self.outer = Span(1, 1, 1, 1)      # the span of the expression read last, with its brackets
+
+    def program(self) -> tuple:
+        self.kinds, self.texts, self.starts, self.line_starts = _tokens(self.source)
+        self.i = 0
+        decls = []
+        try:
+            while self.kinds[self.i]:
+                decls.append(self.decl())
+        except RecursionError:
+            raise _Stop from None
+        return tuple(decls)
+
+    # tokens
+    def span(self, j: int) -> Span:
+        start = self.starts[j]
+        line = bisect_right(self.line_starts, start)
+        column = start - self.line_starts[line - 1] + 1
+        return Span(line, column, line, column + len(self.texts[j]))
+
+    def name(self) -> tuple[str, Span]:
+        i = self.i
+        if self.kinds[i] != "name":     # keywords too: Lark's contextual lexer reads them as names here
+            raise _Stop
+        self.i = i + 1
+        return self.texts[i], self.span(i)
+
+    def expect(self, kind: str) -> Span:
+        i = self.i
+        if self.kinds[i] != kind:
+            raise _Stop
+        self.i = i + 1
+        return self.span(i)
+
+    def open(self, kind: str) -> Span:
+        self.level += 1
+        if self.level > _FAST_DEPTH:
+            raise _Stop
+        return self.expect(kind)
+
+    def close(self, kind: str) -> Span:
+        self.level -= 1
+        return self.expect(kind)
+
+    # declarations
+    def decl(self):
+        i = self.i
+        self.decl_starts.append(self.starts[i])
+        word = self.texts[i]
+        if self.kinds[i] != "name" or word not in _DECL_WORDS:
+            raise _Stop
+        keyword = self.span(i)
+        self.i = i + 1
+        if word == "let":
+            name, name_span = self.name()
+            self.expect("=")
+            value = self.expr()
+            return ast.LetDecl(name, name_span, value, keyword.to(self.outer))
+        if word == "scene":
+            shape = self.expr()
+            return ast.SceneDecl(shape, keyword.to(self.outer))
+        if word == "param":
+            name, name_span = self.name()
+            self.expect("=")
+            default = self.expr()
+            end, bounds = self.outer, None
+            if self.kinds[self.i] == "name" and self.texts[self.i] == "in":
+                self.i += 1
+                self.open("[")
+                low = self.expr()
+                self.expect(",")
+                high = self.expr()
+                end, bounds = self.close("]"), (low, high)
+            return ast.ParamDecl(name, name_span, default, bounds, keyword.to(end))
+        if word == "material" or word == "light":
+            name, name_span = self.name()
+            block = self.block()
+            node = ast.MaterialDecl if word == "material" else ast.LightDecl
+            return node(name, name_span, block, keyword.to(block.span))
+        if word == "path":
+            keyframes, end = self.separated(self.keyframe)
+            return ast.PathDecl(keyframes, keyword.to(end))
+        block = self.block()
+        node = ast.CameraDecl if word == "camera" else ast.RenderDecl
+        return node(block, keyword.to(block.span))
+
+    def separated(self, item) -> tuple[tuple, Span]:
+        """`{ item, item ... }`, items separated by commas or new lines: the
+        items and the span of the braces."""
+        start = self.open("{")
+        kinds, items = self.kinds, []
+        while kinds[self.i] in _SEPARATORS:
+            self.i += 1
+        while kinds[self.i] != "}":
+            items.append(item())
+            if kinds[self.i] == "}":
+                break
+            if kinds[self.i] not in _SEPARATORS:
+                raise _Stop
+            while kinds[self.i] in _SEPARATORS:
+                self.i += 1
+        return tuple(items), start.to(self.close("}"))
+
+    def block(self) -> ast.Block:
+        entries, span = self.separated(self.entry)
+        return ast.Block(entries, span)
+
+    def entry(self) -> ast.Entry:
+        key, key_span = self.name()
+        self.expect(":")
+        if self.kinds[self.i] == "{":
+            value = self.block()
+            return ast.Entry(key, key_span, value, key_span.to(value.span))
+        value = self.expr()
+        return ast.Entry(key, key_span, value, key_span.to(self.outer))
+
+    def keyframe(self) -> ast.Keyframe:
+        time = self.texts[self.i]
+        time_span = self.expect("number")
+        self.expect(":")
+        block = self.block()
+        return ast.Keyframe(float(time), time_span, block, time_span.to(block.span))
+
+    # expressions
+    def expr(self):
+        """Binary operators, left to right by precedence, without recursion."""
+        node = self.operand()
+        kinds, texts = self.kinds, self.texts
+        precedence = _PRECEDENCE.get(kinds[self.i])
+        if precedence is None:
+            return node
+        operands, outers, depths, operators = [node], [self.outer], [self.depth], []
+        while True:
+            while operators and (precedence is None or operators[-1][0] >= precedence):
+                right, left, op = operands.pop(), operands.pop(), operators.pop()[1]
+                right_outer = outers.pop()
+                span = outers.pop().to(right_outer)
+                depth = max(depths.pop(), depths.pop()) + 1
+                if depth > _FAST_DEPTH:
+                    raise _Stop
+                operands.append(ast.Binary(op, left, right, span))
+                outers.append(span)
+                depths.append(depth)
+            if precedence is None:
+                self.depth, self.outer = depths[0], outers[0]
+                return operands[0]
+            operators.append((precedence, texts[self.i]))
+            self.i += 1
+            operands.append(self.operand())
+            outers.append(self.outer)
+            depths.append(self.depth)
+            precedence = _PRECEDENCE.get(kinds[self.i])
+
+    def operand(self):
+        """Unary minuses, an atom and its method calls."""
+        kinds, texts, i = self.kinds, self.texts, self.i
+        minuses = []
+        while kinds[i] == "-":
+            minuses.append(i)
+            i += 1
+        self.i = i
+        self.level += len(minuses)
+        if self.level > _FAST_DEPTH:
+            raise _Stop
+        kind = kinds[i]
+        if kind == "number":
+            self.i, depth = i + 1, 0
+            node = ast.Number(float(texts[i]), self.span(i))
+            outer = node.span
+        elif kind == "name" and kinds[i + 1] == "(":
+            name, name_span = self.name()
+            self.open("(")
+            args = self.arguments()
+            node, depth = ast.Call(name, name_span, args, name_span.to(self.close(")"))), self.depth + 1
+            outer = node.span
+        elif kind == "name":
+            name, name_span = self.name()
+            node, depth, outer = ast.Name(name, name_span), 0, name_span
+        elif kind == "(":
+            start = self.open("(")
+            node = self.expr()
+            depth = self.depth
+            if kinds[self.i] == ",":
+                items = [node]
+                while kinds[self.i] == "," and (len(items) == 1 or kinds[self.i + 1] != ")"):
+                    self.i += 1
+                    items.append(self.expr())
+                    depth = max(depth, self.depth)
+                if kinds[self.i] == ",":
+                    self.i += 1
+                node, depth = ast.Vector(tuple(items), start.to(self.close(")"))), depth + 1
+                outer = node.span
+            else:
+                # Lark's span of a bracketed operand leaves the brackets out,
+                # but the spans of the nodes around it take them in.
+                outer = start.to(self.close(")"))
+        else:
+            raise _Stop
+        while kinds[self.i] == ".":
+            self.i += 1
+            name, name_span = self.name()
+            self.open("(")
+            args = self.arguments()
+            node = ast.Method(node, name, name_span, args, outer.to(self.close(")")))
+            depth = max(depth, self.depth) + 1
+            outer = node.span
+        self.level -= len(minuses)
+        for j in reversed(minuses):
+            node = ast.Unary("-", node, self.span(j).to(outer))
+            outer = node.span
+        depth += len(minuses)
+        if depth > _FAST_DEPTH:
+            raise _Stop
+        self.depth, self.outer = depth, outer
+        return node
+
+    def arguments(self) -> tuple[ast.Arg, ...]:
+        """A call's arguments, up to its ')'; self.depth is the deepest."""
+        kinds, texts = self.kinds, self.texts
+        args, depth = [], 0
+        while kinds[self.i] != ")":
+            i = self.i
+            if kinds[i] == "name" and kinds[i + 1] == ":":
+                name, name_span = self.name()
+                self.i += 1
+                value = self.expr()
+                args.append(ast.Arg(name, value, name_span.to(self.outer)))
+            else:
+                value = self.expr()
+                args.append(ast.Arg(None, value, self.outer))
+            depth = max(depth, self.depth + 1)
+            if kinds[self.i] != ",":
+                break
+            self.i += 1
+        self.depth = depth
+        return tuple(args)
+
+
 def parse(text: str, path: str = "<string>") -> ast.Program:
-    """Parse `.frac` source into an `ast.Program`; raise `SceneError`."""
+    """Parse `.frac` source into an `ast.Program`; raise `SceneError`.
+
+    The hand-written parser below reads valid files (fast: large scenes
+    parse in seconds); wherever it stops, Lark reads the file from the
+    declaration before, so that errors and their places are Lark's."""
+    if len(text.encode("utf-8", errors="replace")) > MAX_FILE_BYTES:
+        raise SceneError([diagnostic(path, text, Span(1, 1, 1, 2),
+                                     f"the scene file is larger than {MAX_FILE_BYTES // (1024 * 1024)} MB")])
+    source = _LONE_CR.sub("\n", text)
+    reader = _FastParser(source)
+    collecting = gc.isenabled()
+    gc.disable()     # millions of new nodes, none of them garbage: collections only cost time
+    try:
+        decls = reader.program()
+    except _Stop:
+        decls = None
+    finally:
+        if collecting:
+            gc.enable()
+    if decls is None:
+        restart = reader.decl_starts[-2] if len(reader.decl_starts) > 1 else 0
+        _lark_parse(source, text, path, restart)      # raises the error it meets first
+        decls = _lark_parse(source, text, path, 0)    # a valid file the fast parser stops on
+    return ast.Program(decls, path, text)
+
+
+def _lark_parse(source: str, text: str, path: str, start: int) -> tuple:
+    """Lark's parse of `source` from offset `start` (the start of a
+    declaration); errors are placed in the whole file."""
+    line_offset = source.count("\n", 0, start)
+    column_offset = start - (source.rfind("\n", 0, start) + 1)
+
     def fail(span: Span, message: str):
+        def column(line: int, col: int) -> int:
+            return col + column_offset if line == 1 else col
+        span = Span(span.line + line_offset, column(span.line, span.column),
+                    span.end_line + line_offset, column(span.end_line, span.end_column))
         raise SceneError([diagnostic(path, text, span, message)])
 
-    if len(text.encode("utf-8", errors="replace")) > MAX_FILE_BYTES:
-        fail(Span(1, 1, 1, 2), f"the scene file is larger than {MAX_FILE_BYTES // (1024 * 1024)} MB")
     try:
-        decls = _ToAst().transform(_parser().parse(_LONE_CR.sub("\n", text)))
+        return _ToAst().transform(_parser().parse(source[start:]))
     except UnexpectedInput as error:
         token = getattr(error, "token", None)
         if token is not None and token.type == "$END":
             lines = source_lines(text)
             last = len(lines) - (len(lines) > 1 and lines[-1] == "")   # the line a final break ends
-            span = Span(last, len(lines[last - 1]) + 1, last, len(lines[last - 1]) + 2)
-        else:
-            span = Span(error.line, error.column, error.line, error.column + len(str(token or " ")))
-        fail(span, _syntax_message(error))
+            raise SceneError([diagnostic(path, text, Span(last, len(lines[last - 1]) + 1, last,
+                                                          len(lines[last - 1]) + 2), _syntax_message(error))])
+        fail(Span(error.line, error.column, error.line, error.column + len(str(token or " "))),
+             _syntax_message(error))
     except _NestingError as error:
         where = error.token
         fail(_span(where.meta if isinstance(where, Tree) else where), f"nesting deeper than {MAX_NESTING} levels")
-    return ast.Program(decls, path, text)
