@@ -13,7 +13,7 @@ import signal
 import sys
 import threading
 import time
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 
 from .errors import NoSceneFile, RenderError, SceneError
 from .passes import PASSES
@@ -152,7 +152,22 @@ def _require_writable(*options, folders_made: bool = False) -> None:
             raise RenderError(f"{name} {given}: {problem}")
 
 
+def _cluster(args):
+    """--workers N / --cluster ADDRESS: a context that gives a Dask client
+    (the extra is checked now, before any work; the cluster is reached on
+    entering), else one that gives None."""
+    if args.workers is None and args.cluster is None:
+        return nullcontext()
+    from .cluster import MISSING_EXTRA, connect, installed
+    if not installed():
+        raise UsageError(MISSING_EXTRA)
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers {args.workers}: must be at least 1")
+    return connect(args.workers, args.cluster)
+
+
 def command_render(args) -> int:
+    cluster = _cluster(args)
     if not args.output.lower().endswith(IMAGE_EXTENSIONS):
         raise UsageError(f"-o {args.output}: the output must end in one of {', '.join(IMAGE_EXTENSIONS)}")
     exr = args.output.lower().endswith(".exr")
@@ -166,7 +181,8 @@ def command_render(args) -> int:
     overrides = {"width": args.width, "height": args.height, "samples": args.samples, "aovs": args.aov}
     try:
         start = time.perf_counter()
-        image = scene.render(seed=args.seed, progress=not args.quiet, **overrides)
+        with cluster as client:
+            image = scene.render(seed=args.seed, progress=not args.quiet, cluster=client, **overrides)
     except ValueError as error:
         raise UsageError(str(error)) from None
     image.save(args.output, half=args.half, compression=args.compression or "zip", bits=args.bits)
@@ -299,6 +315,7 @@ def command_view(args) -> int:
 
 
 def command_animate(args) -> int:
+    cluster = _cluster(args)
     try:
         first, second = args.output % 0, args.output % 1
     except (TypeError, ValueError):
@@ -323,8 +340,9 @@ def command_animate(args) -> int:
     overrides = {"width": args.width, "height": args.height, "samples": args.samples, "aovs": args.aov}
     start = time.perf_counter()
     try:
-        files, rendered = render_frames(scene, args.output, args.fps, seed=args.seed, overwrite=args.overwrite,
-                                        progress=not args.quiet, **overrides)
+        with cluster as client:
+            files, rendered = render_frames(scene, args.output, args.fps, seed=args.seed, overwrite=args.overwrite,
+                                            progress=not args.quiet, cluster=client, **overrides)
     except ValueError as error:
         raise UsageError(str(error)) from None
     if args.mp4:
@@ -416,6 +434,12 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--aov", type=_passes, action="extend", metavar="PASS[,PASS...]",
                        help=f"add passes to the EXR (repeatable): {', '.join(PASSES)} "
                             "(see docs/compositing.md)")
+        farm = p.add_mutually_exclusive_group()
+        farm.add_argument("--workers", type=int, metavar="N",
+                          help="render on a local Dask cluster of N processes (the 'cluster' extra; "
+                               "see docs/cluster.md)")
+        farm.add_argument("--cluster", metavar="ADDRESS",
+                          help="render on the workers of the Dask scheduler at ADDRESS (tcp://HOST:8786)")
         device_options(p)
 
     render = commands.add_parser("render", help="render a scene to EXR or PNG",

@@ -1,0 +1,282 @@
+"""Render farms: an animation's frames, or the row tiles of one large still,
+rendered by the workers of a Dask cluster (docs/cluster.md).
+
+Only the scene's text and settings travel (`SceneSpec`): each worker
+process loads the scene, opens its OpenCL device and builds the kernel
+once, and keeps them for the tasks after (`_worker_scene`). Workers return
+pixels; the client alone writes files, each frame atomically, as its task
+finishes, so a frame is written once even when Dask reruns the tasks of a
+worker that died, and an interrupted client leaves only whole frames.
+Frames and tiles equal a local render of them bit for bit on the same
+kind of device: sampling is seeded per pixel of the whole frame.
+
+Dask (the `cluster` extra) is imported only here, and only when a
+cluster is used.
+"""
+from __future__ import annotations
+
+import contextlib
+import itertools
+import logging
+import os
+import sys
+import threading
+import time
+import uuid
+from collections import defaultdict
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Callable, Iterable, Iterator
+
+import numpy as np
+
+from .api import Image, Scene, image_from_pixels, loads
+from .errors import RenderError
+
+MISSING_EXTRA = "--workers and --cluster need Dask's distributed: pip install 'fractalc[cluster]'"
+TILE_ROWS = 64          # rows of a still's tile at most: a few MB per tile of a wide image
+BLOCK_ROWS = 4          # tiles start on whole lane blocks (the tallest, 16 lanes, is 4 rows)
+TASKS_PER_WORKER = 2    # in flight: each worker has the next task while it renders one
+
+
+def installed() -> bool:
+    """Whether the `cluster` extra (dask's distributed) can be imported."""
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+@contextlib.contextmanager
+def connect(workers: int | None = None, address: str | None = None):
+    """A Dask client: of a local cluster of `workers` processes (one thread
+    each: a worker renders one task at a time on its device), or of the
+    scheduler at `address`."""
+    if not installed():
+        raise RenderError(MISSING_EXTRA)
+    import distributed
+    if address is None:
+        with distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                      dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
+                distributed.Client(cluster) as client:
+            yield client
+        return
+    try:
+        client = distributed.Client(address, timeout="10s")
+    except (OSError, TimeoutError) as error:
+        raise RenderError(f"cannot reach the Dask scheduler at {address}: {error}") from None
+    with client:
+        yield client
+
+
+# ---- what travels ----------------------------------------------------------
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """A scene as it travels to workers: its checked text, path (for
+    messages), params, precision, device choice and render settings."""
+    text: str
+    path: str
+    params: tuple[tuple[str, float], ...]
+    precision: str
+    device: str | None        # None: each worker's own ($FRACTALC_DEVICE, else its first GPU)
+    lanes: int | None
+    render_keys: tuple[tuple[str, object], ...]
+
+
+def scene_spec(scene: Scene, render_keys: dict) -> SceneSpec:
+    """`scene` and the render settings to send; the settings are checked
+    here, before any work is sent."""
+    from .lanes import ENVIRONMENT, parse_lanes
+    scene._settings(render_keys)
+    keys = tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in sorted(render_keys.items()))
+    # lanes given here ($FRACTALC_LANES too) travel; otherwise each worker's device chooses
+    lanes = scene.lanes or (parse_lanes(os.environ[ENVIRONMENT], ENVIRONMENT)
+                            if os.environ.get(ENVIRONMENT) else None)
+    return SceneSpec(scene.checked.source, scene.checked.file, tuple(scene.params.items()), scene.precision,
+                     scene.device_spec, lanes, keys)
+
+
+@dataclass(frozen=True)
+class Done:
+    """A task's result: its value, the worker that computed it and the
+    seconds it took there."""
+    value: object
+    worker: str
+    seconds: float
+
+
+# ---- on the workers ----------------------------------------------------------
+
+_device_lock = threading.Lock()     # one render at a time per worker process: one device, one queue
+
+
+@lru_cache(maxsize=8)
+def _worker_scene(text: str, path: str, precision: str, device: str | None, lanes: int | None) -> Scene:
+    """The scene loaded once per worker process; it keeps its built kernels."""
+    return loads(text, precision=precision, device=device, path=path, lanes=lanes)
+
+
+def _on_worker(spec: SceneSpec, work: Callable[[Scene, dict], object]) -> Done:
+    from distributed import get_worker
+    with _device_lock:
+        start = time.perf_counter()
+        try:
+            scene = _worker_scene(spec.text, spec.path, spec.precision, spec.device, spec.lanes)
+            scene.set_params(dict(spec.params))
+            value = work(scene, dict(spec.render_keys))
+        except RenderError as error:
+            message = f"{error} (on the worker at {get_worker().address})"
+        else:
+            return Done(value, get_worker().address, time.perf_counter() - start)
+    # raised afresh, outside the handler: the OpenCL error it would chain to does not pickle
+    raise RenderError(message)
+
+
+def _frame_task(spec: SceneSpec, path, time: float, seed: int) -> Done:
+    from .animate import render_frame
+    return _on_worker(spec, lambda scene, keys: render_frame(scene, path, time, seed, keys))
+
+
+def _tile_task(spec: SceneSpec, seed: int, camera, first: int, count: int) -> Done:
+    """Rows `first` .. `first + count - 1` of the still, and the image's
+    metadata with the first tile."""
+    return _on_worker(spec, lambda scene, keys: _render_tile(scene, keys, seed, camera, first, count))
+
+
+def _render_tile(scene: Scene, render_keys: dict, seed: int, camera, first: int, count: int):
+    from . import run
+    from .passes import channels
+    settings = scene._settings(render_keys)
+    camera = camera or scene.checked.camera
+    program, target = scene._program(settings, camera)
+    frame = run.Frame(settings.width, settings.height, settings.samples, seed, run.camera_block(camera))
+    rows = run.render_rows(program, scene.device, frame, scene._param_values(), target.lanes, target.double,
+                           first, count, channels(settings.aovs))
+    return rows, (scene._metadata(settings, camera, 0.0) if first == 0 else None)
+
+
+# ---- on the client -------------------------------------------------------------
+
+def worker_count(client) -> int:
+    return max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
+
+
+class _Job:
+    """Tasks sent with a bounded number in flight (so the client holds only
+    a few results beyond its output), taken as they finish; one progress
+    bar, and per-worker times for the summary."""
+
+    def __init__(self, client, total: int, done_before: int, unit: str, progress: bool):
+        from tqdm import tqdm
+        self.client, self.unit, self.progress = client, unit, progress
+        self.workers = worker_count(client)
+        self.limit = TASKS_PER_WORKER * self.workers
+        self.times: dict[str, list[float]] = defaultdict(list)
+        self.start = time.perf_counter()
+        self.bar = tqdm(total=total, initial=done_before, unit=unit, leave=False, desc="cluster",
+                        disable=not (progress and sys.stderr.isatty()))
+
+    def run(self, tasks: Iterable[tuple[object, Callable, tuple]], take: Callable[[object, object], None]) -> None:
+        """Send (tag, function, args) `tasks`; `take(tag, value)` each result
+        here, in the order they finish. A task's error (a failed kernel
+        build, say) cancels the rest and is raised here."""
+        from distributed import as_completed
+        from distributed.scheduler import KilledWorker
+        pending: Iterator = iter(tasks)
+        running, tags, job = as_completed(), {}, uuid.uuid4().hex
+
+        def send_next() -> None:
+            for tag, function, args in itertools.islice(pending, 1):
+                future = self.client.submit(function, *args, key=f"fractalc-{tag}-{job}")
+                tags[future.key] = (tag, future)
+                running.add(future)
+
+        for _ in range(self.limit):
+            send_next()
+        try:
+            for future in running:
+                tag, _ = tags.pop(future.key)
+                try:
+                    done = future.result()
+                except KilledWorker:
+                    raise RenderError(f"{tag}: the workers running it died each time (see the workers' logs)") \
+                        from None
+                take(tag, done.value)
+                self.times[done.worker].append(done.seconds)
+                self.bar.update(1)
+                self.bar.set_postfix(busy=f"{min(len(tags), self.workers)}/{self.workers} workers", refresh=False)
+                send_next()
+        finally:
+            self.client.cancel([future for _, future in tags.values()])
+            self.bar.close()
+
+    def summary(self) -> str:
+        """Time per task overall and per worker."""
+        elapsed = time.perf_counter() - self.start
+        count = sum(len(t) for t in self.times.values())
+        lines = [f"cluster: {self._count(count)} on {len(self.times)} workers in {elapsed:.2f} s "
+                 f"({elapsed / max(count, 1):.3f} s per {self.unit})"]
+        for worker, seconds in sorted(self.times.items()):
+            lines.append(f"  {worker}: {self._count(len(seconds))}, {sum(seconds) / len(seconds):.3f} s each")
+        return "\n".join(lines)
+
+    def _count(self, n: int) -> str:
+        return f"{n} {self.unit}{'' if n == 1 else 's'}"
+
+    def report(self) -> None:
+        if self.progress:
+            print(self.summary(), file=sys.stderr)
+
+
+def render_frames(scene: Scene, pattern: str, fps: float, client, seed: int = 0, overwrite: bool = False,
+                  progress: bool = False, **render_keys) -> tuple[list[str], int]:
+    """`animate.render_frames` on the cluster of `client` (a
+    distributed.Client): the frames not on disk yet rendered by its
+    workers, each written here as it arrives. Returns the frame files and
+    how many were rendered now."""
+    from .animate import plan_frames, save_frame
+    plan = plan_frames(scene, pattern, fps, seed, overwrite, render_keys)
+    spec = scene_spec(scene, render_keys)
+    job = _Job(client, len(plan.files), len(plan.files) - len(plan.missing), "frame", progress)
+    job.run(((index, _frame_task, (spec, plan.path, float(plan.times[index]), seed)) for index in plan.missing),
+            lambda index, image: save_frame(image, plan, index))
+    job.report()
+    return plan.files, len(plan.missing)
+
+
+def render_still(scene: Scene, client, seed: int = 0, camera=None, progress: bool = False,
+                 tile_rows: int | None = None, **render_keys) -> Image:
+    """`Scene.render` on the cluster of `client`: tiles of `tile_rows` rows
+    (default: enough tiles for 4 per worker, whole lane blocks, at most
+    TILE_ROWS) rendered by its workers, assembled here into the image as
+    they arrive (the client holds the image and a few tiles)."""
+    if tile_rows is not None and tile_rows < 1:
+        raise ValueError(f"tile_rows must be at least 1, not {tile_rows}")
+    spec = scene_spec(scene, render_keys)
+    settings = scene._settings(render_keys)
+    height, width = settings.height, settings.width
+    if tile_rows is None:
+        share = -(-height // (4 * worker_count(client)))
+        tile_rows = min(TILE_ROWS, -(-share // BLOCK_ROWS) * BLOCK_ROWS)
+    starts = range(0, height, tile_rows)
+    job = _Job(client, len(starts), 0, "tile", progress)
+    assembled: dict = {}
+
+    def take(first: int, value) -> None:
+        rows, metadata = value
+        if "pixels" not in assembled:
+            try:
+                assembled["pixels"] = np.empty((height, width, rows.shape[2]), dtype=np.float32)
+            except MemoryError:
+                raise RenderError(f"out of memory for a {width}x{height} image") from None
+        assembled["pixels"][first:first + len(rows)] = rows
+        if metadata is not None:
+            assembled["metadata"] = metadata
+
+    job.run(((first, _tile_task, (spec, seed, camera, first, min(tile_rows, height - first))) for first in starts),
+            take)
+    job.report()
+    metadata = {**assembled["metadata"], "render_seconds": f"{time.perf_counter() - job.start:.3f}"}
+    return image_from_pixels(assembled["pixels"], settings.aovs, metadata)
