@@ -62,21 +62,27 @@ def _extension(path: str) -> str:
     return "." + path.rsplit(".", 1)[-1].lower() if "." in path else ""
 
 
-def _face_normals(mesh: Mesh) -> np.ndarray:
-    a, b, c = (mesh.vertices[mesh.faces[:, i]] for i in range(3))
+def _face_normals(corners: np.ndarray) -> np.ndarray:
+    """Unit normals of (F, 3, 3) triangles (0 for a degenerate one)."""
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
     normals = np.cross(b - a, c - a)
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     return normals / np.where(length > 0, length, 1.0)
 
 
+WRITE_FACES = 1 << 20    # faces (or vertices) per block written: a copy of the whole mesh would double its memory
+
+
 def _write_stl(mesh: Mesh, f) -> None:
     record = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
-    triangles = np.zeros(len(mesh.faces), dtype=record)
-    triangles["normal"] = _face_normals(mesh)
-    triangles["corners"] = mesh.vertices[mesh.faces]
     f.write(b"fractalc binary STL".ljust(80, b" "))
     f.write(np.uint32(len(mesh.faces)).tobytes())
-    f.write(triangles.tobytes())
+    for start in range(0, len(mesh.faces), WRITE_FACES):
+        faces = mesh.faces[start:start + WRITE_FACES]
+        triangles = np.zeros(len(faces), dtype=record)
+        triangles["corners"] = mesh.vertices[faces]
+        triangles["normal"] = _face_normals(triangles["corners"])
+        f.write(triangles)
 
 
 def _write_ply(mesh: Mesh, f) -> None:
@@ -85,11 +91,17 @@ def _write_ply(mesh: Mesh, f) -> None:
              "property float x\nproperty float y\nproperty float z\n"
              "property float nx\nproperty float ny\nproperty float nz\n"
              f"element face {len(mesh.faces)}\nproperty list uchar int vertex_indices\nend_header\n").encode())
-    f.write(np.hstack([mesh.vertices, mesh.normals]).astype("<f4").tobytes())
-    faces = np.zeros(len(mesh.faces), dtype=[("count", "u1"), ("indices", "<i4", 3)])
-    faces["count"] = 3
-    faces["indices"] = mesh.faces
-    f.write(faces.tobytes())
+    for start in range(0, len(mesh.vertices), WRITE_FACES):
+        block = np.empty((len(mesh.vertices[start:start + WRITE_FACES]), 6), "<f4")
+        block[:, :3] = mesh.vertices[start:start + WRITE_FACES]
+        block[:, 3:] = mesh.normals[start:start + WRITE_FACES]
+        f.write(block)
+    for start in range(0, len(mesh.faces), WRITE_FACES):
+        block = mesh.faces[start:start + WRITE_FACES]
+        faces = np.zeros(len(block), dtype=[("count", "u1"), ("indices", "<i4", 3)])
+        faces["count"] = 3
+        faces["indices"] = block
+        f.write(faces)
 
 
 def _write_obj(mesh: Mesh, f) -> None:
@@ -201,8 +213,8 @@ def _march(scene, grid: Grid, progress: bool, chunk_points: int) -> tuple[np.nda
                                                            allow_degenerate=False)[:2],
                                             slab.shape[2] - 1, seam, vertex_count)
             verts[:, 2] += first - 1      # padded plane index to grid plane index
-            vertex_parts.append(verts)
-            face_parts.append(faces)
+            vertex_parts.append(verts.astype(np.float32))   # grid units: float32 is exact to 1e-4 cell
+            face_parts.append(faces.astype(np.int32))
             vertex_count += len(verts)
     finally:
         bar.close()
@@ -210,9 +222,15 @@ def _march(scene, grid: Grid, progress: bool, chunk_points: int) -> tuple[np.nda
         raise ValueError("no surface inside the bounds (the distance has the same sign everywhere)")
     # padded indices: sample (i, j) is at padded (i + 1, j + 1); a cap
     # between the padding and the grid's edge goes onto the edge
-    vertices = np.clip(np.concatenate(vertex_parts) - [1, 1, 0], 0, np.subtract(grid.counts, 1))
-    vertices = (grid.lower + grid.spacing * vertices).astype(np.float32)
-    return vertices, np.concatenate(face_parts).astype(np.int32)
+    vertices = np.concatenate(vertex_parts)
+    del vertex_parts[:]
+    vertices -= np.float32([1, 1, 0])
+    np.clip(vertices, 0, np.subtract(grid.counts, 1).astype(np.float32), out=vertices)
+    vertices *= np.float32(grid.spacing)
+    vertices += grid.lower.astype(np.float32)
+    faces = np.concatenate(face_parts)
+    del face_parts[:]
+    return vertices, faces
 
 
 def _slab_mesh(marched, top_plane: int, seam, vertex_count: int):

@@ -77,7 +77,7 @@ def test_slabs_weld_into_the_same_mesh_as_one_block():
     scene = fractalc.loads("scene torus(1, 0.4).rotate((1, 0, 0), 30)\n")
     from fractalc.mesh import mesh
     whole = mesh(scene, 40, chunk_points=10 ** 7)
-    sliced = mesh(scene, 40, chunk_points=1)
+    sliced = mesh(scene, 40, chunk_points=2000)    # a z-plane (41 x 41 points) per call
     assert len(sliced.vertices) == len(whole.vertices)
     # the same points, up to float32 rounding of the grid coordinates
     rows = [v[np.lexsort(np.round(v, 4).T)] for v in (sliced.vertices, whole.vertices)]
