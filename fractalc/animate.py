@@ -43,6 +43,7 @@ def _frame_settings(scene: Scene, fps: float, seed: int, render_keys: dict) -> s
         "scene_sha256": hashlib.sha256(scene.checked.source.encode()).hexdigest(),
         "params": scene.params,
         "render": dataclasses.asdict(scene._settings(render_keys)),
+        "camera": dataclasses.asdict(scene.checked.camera),    # the file's, or --camera's
         "fps": fps,
         "seed": seed,
     }
@@ -73,21 +74,42 @@ class FramePlan:
     files: list[str]
     settings: str               # _frame_settings
     missing: list[int]
+    chosen: range               # the frames asked for (all of them, or a --frames range)
 
 
-def plan_frames(scene: Scene, pattern: str, fps: float, seed: int, overwrite: bool, render_keys: dict) -> FramePlan:
+def parse_frame_range(text: str) -> tuple[int, int | None]:
+    """`--frames`: FIRST-LAST, FIRST- (to the end) or one frame N, counted
+    from 0; (first, last), last None for the end."""
+    first, dash, last = (part.strip() for part in text.partition("-"))
+    numbers = [first, last] if last else [first]
+    if not all(n.isascii() and n.isdigit() for n in numbers) or (last and int(last) < int(first)):
+        raise ValueError(f"'{text}' is not a frame range: N, FIRST-LAST or FIRST- (frames count from 0, "
+                         "FIRST at most LAST)")
+    if not dash:
+        return int(first), int(first)
+    return int(first), int(last) if last else None
+
+
+def plan_frames(scene: Scene, pattern: str, fps: float, seed: int, overwrite: bool, render_keys: dict,
+                frames: tuple[int, int | None] | None = None) -> FramePlan:
     """The frames of the scene's path and which of them are not on disk yet
-    from the same scene text and settings (all of them with `overwrite`);
-    makes the frames' folder."""
+    from the same scene text and settings (all of them with `overwrite`),
+    among `frames` (first, last or None: the end) if given, so that
+    machines can share an animation; makes the frames' folder."""
     path = scene.checked.path
     if path is None:
         raise ValueError(f"{scene.checked.file} has no 'path' to animate")
     times = frame_times(path, fps)
     files = [frame_file(pattern, i) for i in range(len(times))]
+    first, last = frames or (0, None)
+    if first >= len(times):
+        raise ValueError(f"--frames {first}-{'' if last is None else last}: the path has {len(times)} frames "
+                         f"at {fps:g} fps, 0 to {len(times) - 1}")
+    chosen = range(first, len(times) if last is None else min(last + 1, len(times)))
     settings = _frame_settings(scene, fps, seed, render_keys)
-    missing = [i for i, f in enumerate(files) if overwrite or _stamp(f) != settings]
+    missing = [i for i in chosen if overwrite or _stamp(files[i]) != settings]
     os.makedirs(os.path.dirname(os.path.abspath(files[0])), exist_ok=True)
-    return FramePlan(path, times, files, settings, missing)
+    return FramePlan(path, times, files, settings, missing, chosen)
 
 
 def render_frame(scene: Scene, path, time: float, seed: int, render_keys: dict):
@@ -105,19 +127,25 @@ def save_frame(image, plan: FramePlan, index: int) -> None:
 
 
 def render_frames(scene: Scene, pattern: str, fps: float, seed: int = 0, overwrite: bool = False,
-                  progress: bool = False, cluster=None, **render_keys) -> tuple[list[str], int]:
+                  progress: bool = False, cluster=None, frames: tuple[int, int | None] | None = None,
+                  **render_keys) -> tuple[list[str], int]:
     """Render every frame of the scene's path that is not on disk yet from
     the same scene text and settings (all of them with `overwrite`), here
-    or by the workers of `cluster`, a Dask client (docs/cluster.md).
+    or by the workers of `cluster`, a Dask client (docs/cluster.md); only
+    `frames` (first, last or None: the end), if given (here, not on a cluster).
     Returns the frame files, in order, and how many were rendered now. The
     scene's params are restored afterwards."""
     if cluster is not None:
+        if frames is not None:
+            raise ValueError("--frames is for sharing an animation between machines without a cluster; "
+                             "a cluster shares the frames itself")
         from .cluster import render_frames as render_on_cluster
         return render_on_cluster(scene, pattern, fps, cluster, seed, overwrite, progress, **render_keys)
     from tqdm import tqdm
-    plan = plan_frames(scene, pattern, fps, seed, overwrite, render_keys)
+    plan = plan_frames(scene, pattern, fps, seed, overwrite, render_keys, frames)
     original = dict(scene.params)
-    bar = tqdm(total=len(plan.files), initial=len(plan.files) - len(plan.missing), unit="frame", leave=False,
+    files = [plan.files[i] for i in plan.chosen]
+    bar = tqdm(total=len(files), initial=len(files) - len(plan.missing), unit="frame", leave=False,
                disable=not (progress and sys.stderr.isatty()), desc="animating")
     try:
         for index in plan.missing:
@@ -126,7 +154,7 @@ def render_frames(scene: Scene, pattern: str, fps: float, seed: int = 0, overwri
     finally:
         bar.close()
         scene.set_params(original)
-    return plan.files, len(plan.missing)
+    return files, len(plan.missing)
 
 
 def _display_pixels(file: str) -> np.ndarray:

@@ -314,6 +314,14 @@ def command_view(args) -> int:
     return 0
 
 
+def _frame_range(text: str) -> tuple[int, int | None]:
+    from .animate import parse_frame_range
+    try:
+        return parse_frame_range(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
 def command_animate(args) -> int:
     cluster = _cluster(args)
     try:
@@ -326,6 +334,9 @@ def command_animate(args) -> int:
         raise UsageError(f"-o {args.output}: frames must be .exr or .png")
     if args.mp4 and not args.mp4.lower().endswith(".mp4"):
         raise UsageError(f"--mp4 {args.mp4}: the name must end in .mp4")
+    if args.mp4 and args.frames:
+        raise UsageError("--mp4 needs every frame: render the ranges with --frames, then run again without "
+                         "--frames to encode them (frames on disk are kept)")
     if not args.fps > 0:
         raise UsageError("--fps must be greater than 0")
     _require_positive(("--width", args.width), ("--height", args.height), ("--samples", args.samples))
@@ -342,7 +353,8 @@ def command_animate(args) -> int:
     try:
         with cluster as client:
             files, rendered = render_frames(scene, args.output, args.fps, seed=args.seed, overwrite=args.overwrite,
-                                            progress=not args.quiet, cluster=client, **overrides)
+                                            progress=not args.quiet, cluster=client, frames=args.frames,
+                                            **overrides)
     except ValueError as error:
         raise UsageError(str(error)) from None
     if args.mp4:
@@ -534,6 +546,9 @@ def _parser() -> argparse.ArgumentParser:
     animate.add_argument("--fps", type=float, default=30.0, help="frames per second (default 30)")
     animate.add_argument("--mp4", metavar="FILE", help="also encode the frames as an MP4 (the 'mp4' extra)")
     animate.add_argument("--overwrite", action="store_true", help="render every frame, even those on disk")
+    animate.add_argument("--frames", type=_frame_range, metavar="FIRST-LAST",
+                         help="render only these frames, counted from 0: 100-199, 10- (to the end) or 5; "
+                              "machines can share an animation (see docs/animation.md)")
     image_options(animate)
     animate.set_defaults(run=command_animate)
 

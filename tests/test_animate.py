@@ -13,6 +13,7 @@ import pytest
 
 import fractalc
 from fractalc.animate import render_frames
+from fractalc.cli import main
 
 oiio = pytest.importorskip("OpenImageIO")
 
@@ -84,6 +85,39 @@ def test_each_frame_has_the_path_camera_and_params(scene_file, tmp_path):
     assert render_frames(scene, str(tmp_path / "f_%02d.exr"), fps=4, overwrite=True)[1] == FRAMES
 
 
+def frame_pixels(file):
+    return oiio.ImageBuf(str(file)).get_pixels(oiio.FLOAT)
+
+
+def test_frame_ranges_share_an_animation(scene_file, tmp_path):
+    # two machines, one folder: 0-1 and 2- make the frames one run makes
+    scene = fractalc.load(scene_file)
+    pattern = str(tmp_path / "shared" / "f_%02d.exr")
+    files, rendered = render_frames(scene, pattern, fps=4, frames=(0, 1))
+    assert rendered == 2 and files == [pattern % 0, pattern % 1]
+    assert sorted(os.listdir(tmp_path / "shared")) == ["f_00.exr", "f_01.exr"]
+    files, rendered = render_frames(scene, pattern, fps=4, frames=(2, None))
+    assert rendered == FRAMES - 2 and files == [pattern % i for i in range(2, FRAMES)]
+    whole = str(tmp_path / "whole" / "f_%02d.exr")
+    render_frames(scene, whole, fps=4)
+    for index in range(FRAMES):
+        assert np.array_equal(frame_pixels(pattern % index), frame_pixels(whole % index))
+        assert metadata(pattern % index)["path.frame"] == str(index)
+    # a run over every frame finds them all done: a range's frames carry the whole run's stamp
+    assert render_frames(scene, pattern, fps=4)[1] == 0
+
+
+def test_animate_frames_option_renders_one_frame_or_a_clamped_range(scene_file, tmp_path, capsys):
+    pattern = str(tmp_path / "f_%d.png")
+    assert main(["animate", str(scene_file), "-o", pattern, "--fps", "4", "--frames", "3"]) == 0
+    assert sorted(os.listdir(tmp_path)) == sorted([scene_file.name, "f_3.png"])
+    assert "wrote 1 of 1 frames (0 already there)" in capsys.readouterr().err
+    # a range past the end stops at the last frame, so ranges need not know the count
+    assert main(["animate", str(scene_file), "-o", pattern, "--fps", "4", "--frames", "3-99"]) == 0
+    assert "wrote 1 of 2 frames (1 already there)" in capsys.readouterr().err
+    assert sorted(os.listdir(tmp_path)) == sorted([scene_file.name, "f_3.png", "f_4.png"])
+
+
 def test_animate_writes_an_mp4_of_the_frames(scene_file, tmp_path):
     imageio = pytest.importorskip("imageio.v2")
     pytest.importorskip("imageio_ffmpeg")
@@ -103,6 +137,10 @@ def test_animate_writes_an_mp4_of_the_frames(scene_file, tmp_path):
     (["-o", "frame_%d.jpg"], "frames must be .exr or .png"),
     (["-o", "frame_%d.png", "--fps", "0"], "--fps must be greater than 0"),
     (["-o", "frame_%d.png", "--mp4", "out.avi"], "the name must end in .mp4"),
+    (["-o", "frame_%d.png", "--frames", "3-1"], "argument --frames: '3-1' is not a frame range"),
+    (["-o", "frame_%d.png", "--frames", "one"], "argument --frames: 'one' is not a frame range"),
+    (["-o", "frame_%d.png", "--fps", "4", "--frames", "5-"], f"--frames 5-: the path has {FRAMES} frames at 4 fps, 0 to 4"),
+    (["-o", "frame_%d.png", "--frames", "0-1", "--mp4", "fly.mp4"], "--mp4 needs every frame"),
 ])
 def test_animate_usage_errors(scene_file, tmp_path, args, message):
     result = fractalc_cli("animate", scene_file, *args, cwd=tmp_path)

@@ -85,11 +85,13 @@ def test_mistakes_are_usage_errors_naming_the_option(scene_file, tmp_path, capsy
 
 def test_animate_frames_take_the_keys(scene_file, tmp_path):
     pattern = str(tmp_path / "frames" / "f%02d.exr")
-    assert main(["animate", str(scene_file), "-o", pattern, "--fps", "1", "-q",
-                 "--camera", "fov=25", "--render", "ao=0.9"]) == 0
-    for index in (0, 1):
-        found = metadata(pattern % index)
-        assert found["camera.fov"] == "25" and found["render.ao"] == "0.9"
+    assert main(["animate", str(scene_file), "-o", pattern, "--fps", "1", "-q"]) == 0
+    # frames on disk made with other keys are rendered again, not kept
+    for keys in (["--camera", "fov=25"], ["--camera", "fov=25", "--render", "ao=0.9"]):
+        assert main(["animate", str(scene_file), "-o", pattern, "--fps", "1", "-q", *keys]) == 0
+        for index in (0, 1):
+            found = metadata(pattern % index)
+            assert found["camera.fov"] == "25" and found["render.ao"] == ("0.9" if "ao=0.9" in keys else "0.2")
     # the path still moves the camera: position is the path's
     assert metadata(pattern % 1)["camera.position"] == "4 0 1"
 
