@@ -49,11 +49,12 @@ class Surface:
     reflectivity: ir.Expr
     transparency: ir.Expr
     ior: ir.Expr
+    material: ir.Expr      # the material's index among the scene's (the `material` pass)
 
     @staticmethod
-    def of(material: Material) -> "Surface":
+    def of(material: Material, index: int) -> "Surface":
         return Surface(*material.color.items, material.specular, material.shininess,
-                       material.reflectivity, material.transparency, material.ior)
+                       material.reflectivity, material.transparency, material.ior, ir.const(float(index)))
 
     def items(self) -> tuple[ir.Expr, ...]:
         return tuple(getattr(self, f.name) for f in fields(self))
@@ -162,6 +163,12 @@ class _Lowerer:
         self.materials = scene.materials
         self.library = library()
 
+    def surface_of(self, name: str) -> Surface:
+        """The surface of material `name`; its index counts the scene's
+        materials in order (0 the default, then those the file declares, then
+        those `.color(...)` makes)."""
+        return Surface.of(self.materials[name], list(self.materials).index(name))
+
     def shape(self, s: Shape, point: Point, look: tuple[Surface, Coloring | None]):
         """(distance, surface) of shape `s` at `point`; `look` is the
         innermost enclosing material (and orbit-trap colouring)."""
@@ -172,7 +179,7 @@ class _Lowerer:
         if isinstance(s, Primitive):
             return ()
         if isinstance(s, WithMaterial):
-            return ((s.shape, (point, (Surface.of(self.materials[s.material]), s.coloring))),)
+            return ((s.shape, (point, (self.surface_of(s.material), s.coloring))),)
         if isinstance(s, Combination):
             return tuple((part, context) for part in _operands(s))
         return ((s.shape, (self.moved(s, point), look)),)
@@ -389,7 +396,7 @@ def lower(scene: CheckedScene) -> SceneIR:
     """Lower the scene's shape to its distance and surface expressions."""
     lowerer = _Lowerer(scene)
     point = ir.components(POINT)
-    default = (Surface.of(scene.materials[DEFAULT_MATERIAL]), None)
+    default = (lowerer.surface_of(DEFAULT_MATERIAL), None)
     distance, surface = lowerer.shape(scene.shape, point, default)
     cut = scene.render.slice
     if cut is not None:

@@ -12,6 +12,7 @@ PASSES = {
     "ao": ("ao",),
     "shadow": ("shadow",),
     "glow": ("glow.R", "glow.G", "glow.B"),
+    "material": ("material",),
 }
 
 

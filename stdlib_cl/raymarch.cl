@@ -467,6 +467,13 @@ __kernel void render(__global float *out, __constant scalar *params,
 #endif
     store_vec3(glow, CHANNEL_GLOW_R, block, pitch);
 #endif
+#if FEATURE_PASS_MATERIAL
+    // the index of the hit's material (lower.py's Surface.material); -1 where the ray missed
+    real material = (real)-1.0f;
+    if (ANY(centre.hit))
+        material = SELECT(material, surface_at(v3_add(origin, v3_scale(dir, centre.t)), params).material, centre.hit);
+    store_channel(TO_FLOAT(material), CHANNEL_MATERIAL, block, pitch);
+#endif
 }
 
 // Distance estimates at points: `points` holds count x's, then count y's,

@@ -188,6 +188,24 @@ def test_every_pass_has_its_channels_and_plausible_values(tmp_path):
     np.testing.assert_allclose(rgb[~hit], glow[~hit] + [0.05, 0.05, 0.08], atol=1e-6)
 
 
+def test_the_material_pass_numbers_each_hit_by_its_material():
+    scene = fractalc.loads("""material red { color: (1, 0, 0) }
+material blue { color: (0, 0, 1) }
+scene sphere(0.5).material(red) | sphere(0.5).translate((1.2, 0, 0)).material(blue)
+    | sphere(0.4).translate((-1.2, 0, 0)).color((0, 1, 0)) | sphere(0.3).translate((0, 0, 1))
+camera { position: (0, -4, 0), target: (0, 0, 0) }""")
+    image = scene.render(width=48, height=24, aovs=("material",))
+    material = image.passes["material"]
+    hit = np.isfinite(image.depth)
+    assert (material[~hit] == -1).all()
+    # by column: the green sphere (left), red (middle), blue (right); the default one above the red
+    middle_row = material[12]
+    assert {int(v) for v in middle_row[middle_row >= 0]} == {1, 2, 3}
+    assert 3 in middle_row[:16] and 1 in middle_row[16:32] and 2 in middle_row[32:]
+    assert 0 in material[:8, 20:28]
+    assert "FEATURE_PASS_MATERIAL" not in scene.kernel_source() and "CHANNEL_MATERIAL" not in scene.kernel_source()
+
+
 def test_passes_not_asked_for_are_not_in_the_kernel():
     scene = fractalc.loads(SHADED)
     plain = scene.kernel_source()
