@@ -115,7 +115,21 @@ _device_lock = threading.Lock()     # one render at a time per worker process: o
 @lru_cache(maxsize=8)
 def _worker_scene(text: str, path: str, precision: str, device: str | None, lanes: int | None) -> Scene:
     """The scene loaded once per worker process; it keeps its built kernels."""
+    _unmark_at_exit()
     return loads(text, precision=precision, device=device, path=path, lanes=lanes)
+
+
+@lru_cache(maxsize=1)
+def _unmark_at_exit() -> None:
+    """Dask's worker processes end without running atexit (multiprocessing
+    children leave by os._exit), so build.py's marker of a process that
+    built kernels would outlive a worker that closed normally, and the
+    next fractalc process would clear the kernel cache as after a crash:
+    remove it at the worker's normal exit instead."""
+    from multiprocessing.util import Finalize
+    from .lanes import cache_dir
+    marker = cache_dir() / "building" / str(os.getpid())
+    Finalize(None, marker.unlink, kwargs={"missing_ok": True}, exitpriority=0)
 
 
 def _on_worker(spec: SceneSpec, work: Callable[[Scene, dict], object]) -> Done:

@@ -18,6 +18,7 @@ import pytest
 import fractalc
 from fractalc import animate, api, cluster
 from fractalc.errors import RenderError
+from fractalc.lanes import cache_dir
 from test_animate import SCENE   # 32x24, a path of 1 s
 
 oiio = pytest.importorskip("OpenImageIO")
@@ -160,11 +161,24 @@ def test_a_worker_killed_mid_job_has_its_frames_rendered_elsewhere_each_written_
     scene = fractalc.loads(SLOW_SCENE)
     files, rendered = animate.render_frames(scene, str(tmp_path / "farm" / "f_%02d.exr"), SLOW_FPS, cluster=client)
     assert killed and killed[0] not in client.run(os.getpid).values()
+    # killed on purpose, not by the driver: no need to clear the kernel cache
+    (cache_dir() / "building" / str(killed[0])).unlink(missing_ok=True)
     assert rendered == 10 and sorted(saved) == files and set(saved.values()) == {1}
     monkeypatch.undo()
     local, _ = animate.render_frames(scene, str(tmp_path / "local" / "f_%02d.exr"), SLOW_FPS)
     assert_same_frames(files, local)
     client.wait_for_workers(2)
+
+
+def test_a_local_cluster_closes_leaving_no_marker_of_a_crash():
+    # build.py marks processes that use the driver until they exit
+    # normally; Dask's worker processes skip atexit
+    pytest.importorskip("distributed")
+    with cluster.connect(workers=1) as client:
+        fractalc.loads(SCENE).render(cluster=client)
+        (pid,) = client.run(os.getpid).values()
+        assert (cache_dir() / "building" / str(pid)).exists()
+    assert not (cache_dir() / "building" / str(pid)).exists()
 
 
 def test_without_cluster_options_dask_is_never_imported(tmp_path):
