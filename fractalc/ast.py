@@ -10,7 +10,7 @@ from typing import Union
 
 from .errors import Span
 
-node = dataclass(frozen=True, eq=False)
+node = dataclass(frozen=True, eq=False, slots=True)
 
 
 # ---- expressions -----------------------------------------------------------

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import gc
 import re
-from bisect import bisect_right
+from array import array
 from functools import lru_cache
+from itertools import islice
+from sys import intern
 
 from lark import Lark, Token, Transformer_NonRecursive, Tree, v_args
 from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
@@ -247,20 +249,26 @@ _SEPARATORS = frozenset({",", "\n"})
 # The fast parser hands anything this deep to Lark, which reports the
 # nesting limit exactly where it is passed.
 _FAST_DEPTH = MAX_NESTING - 8
+_FIRST_TOKENS = 1 << 16
 
 
-def _tokens(source: str) -> tuple[list, list, list, list]:
+def _tokens(source: str, most: int | None) -> tuple[list, list, list, list]:
     """Kinds ("name", "number", the punctuation itself, "\n", "" at the end,
-    "?" for a character no token starts with), texts and start offsets of
-    the tokens of `source`, and the offsets where its lines start. New lines
-    are kept only directly inside `{ }` and once, as `_BlockNewlines` does."""
-    kinds, texts, starts, line_starts, open_brackets = [], [], [], [0], []
-    for match in _FAST_TOKEN.finditer(source):
+    "?" for a character no token starts with, "..." where `most` tokens
+    were read), texts, lines and columns of the tokens of `source`. New
+    lines are kept only directly inside `{ }` and once, as `_BlockNewlines`
+    does."""
+    # Lines and columns as machine integers: at 8 MB, Python ints would take
+    # a few hundred MB.
+    kinds, texts, lines, columns, open_brackets = [], [], array("q"), array("q"), []
+    add_kind, add_text, add_line, add_column = kinds.append, texts.append, lines.append, columns.append
+    line, line_start = 1, 0
+    for match in islice(_FAST_TOKEN.finditer(source), most):
         group = match.lastindex
+        kind = text = match.group(group)
         if group == 3:
-            kind = text = match.group(3)
             if kind == "\n":
-                line_starts.append(match.end())
+                line, line_start = line + 1, match.end()
                 if not open_brackets or open_brackets[-1] != "{" or kinds[-1] == "\n":
                     continue
             elif kind in "([{":
@@ -268,18 +276,23 @@ def _tokens(source: str) -> tuple[list, list, list, list]:
             elif kind in ")]}" and open_brackets:
                 open_brackets.pop()
         elif group == 1:
-            kind, text = "name", match.group(1)
+            kind, text = "name", intern(text)     # one string for all the `sphere`s
         elif group == 2:
-            kind, text = "number", match.group(2)
+            kind = "number"
         else:
-            kinds.append("" if group == 4 else "?")
-            texts.append("")
-            starts.append(match.start(group))
+            kind, text = ("" if group == 4 else "?"), ""
+        add_kind(kind)
+        add_text(text)
+        add_line(line)
+        add_column(match.start(group) - line_start + 1)
+        if group > 3:
             break
-        kinds.append(kind)
-        texts.append(text)
-        starts.append(match.start(group))
-    return kinds, texts, starts, line_starts
+    else:
+        add_kind("...")
+        add_text("")
+        add_line(line)
+        add_column(0)
+    return kinds, texts, lines, columns
 
 
 class _FastParser:
@@ -291,27 +304,33 @@ class _FastParser:
 
     def __init__(self, source: str):
         self.source = source
-        self.decl_starts: list[int] = []   # offsets of the declarations begun
+        self.decl_starts: list[tuple[int, int]] = []   # lines and columns of the declarations begun
         self.level = 0                     # open brackets and unary minuses, as _BlockNewlines counts
         self.depth = 0                     # of the expression read last, as _DepthTree counts
         self.outer = Span(1, 1, 1, 1)      # the span of the expression read last, with its brackets
 
     def program(self) -> tuple:
-        self.kinds, self.texts, self.starts, self.line_starts = _tokens(self.source)
-        self.i = 0
-        decls = []
-        try:
-            while self.kinds[self.i]:
-                decls.append(self.decl())
-        except RecursionError:
-            raise _Stop from None
-        return tuple(decls)
+        # The first tokens alone first: a hostile file (nesting past the
+        # limit) stops there without reading the rest.
+        for most in (_FIRST_TOKENS, None):
+            self.kinds, self.texts, self.lines, self.columns = _tokens(self.source, most)
+            self.i, self.level, self.decl_starts = 0, 0, []
+            try:
+                decls = []
+                while self.kinds[self.i]:
+                    decls.append(self.decl())
+                return tuple(decls)
+            except RecursionError:
+                raise _Stop from None
+            except _Stop:
+                # Stopped by the end of the tokens read so far (a look-ahead
+                # sees one token past self.i): read them all.
+                if self.kinds[-1] != "..." or self.i < len(self.kinds) - 3:
+                    raise
 
     # tokens
     def span(self, j: int) -> Span:
-        start = self.starts[j]
-        line = bisect_right(self.line_starts, start)
-        column = start - self.line_starts[line - 1] + 1
+        line, column = self.lines[j], self.columns[j]
         return Span(line, column, line, column + len(self.texts[j]))
 
     def name(self) -> tuple[str, Span]:
@@ -341,7 +360,7 @@ class _FastParser:
     # declarations
     def decl(self):
         i = self.i
-        self.decl_starts.append(self.starts[i])
+        self.decl_starts.append((self.lines[i], self.columns[i]))
         word = self.texts[i]
         if self.kinds[i] != "name" or word not in _DECL_WORDS:
             raise _Stop
@@ -553,10 +572,17 @@ def parse(text: str, path: str = "<string>") -> ast.Program:
         if collecting:
             gc.enable()
     if decls is None:
-        restart = reader.decl_starts[-2] if len(reader.decl_starts) > 1 else 0
-        _lark_parse(source, text, path, restart)      # raises the error it meets first
+        line, column = reader.decl_starts[-2] if len(reader.decl_starts) > 1 else (1, 1)
+        _lark_parse(source, text, path, _offset(source, line, column))   # raises the error it meets first
         decls = _lark_parse(source, text, path, 0)    # a valid file the fast parser stops on
     return ast.Program(decls, path, text)
+
+
+def _offset(source: str, line: int, column: int) -> int:
+    start = 0
+    for _ in range(line - 1):
+        start = source.index("\n", start) + 1
+    return start + column - 1
 
 
 def _lark_parse(source: str, text: str, path: str, start: int) -> tuple:
