@@ -19,10 +19,12 @@ import contextlib
 import itertools
 import logging
 import os
+import signal
 import sys
 import threading
 import time
 import uuid
+import warnings
 from collections import defaultdict
 from dataclasses import dataclass
 from functools import lru_cache
@@ -57,9 +59,12 @@ def connect(workers: int | None = None, address: str | None = None):
         raise RenderError(MISSING_EXTRA)
     import distributed
     if address is None:
-        with distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                      dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
-                distributed.Client(cluster) as client:
+        with _ctrl_c_ignored(), warnings.catch_warnings():
+            # the scheduler's HTTP routes move to a free port: no dashboard is shown anyway
+            warnings.filterwarnings("ignore", message="Port 8787 is already in use")
+            cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                               dashboard_address=None, silence_logs=logging.ERROR)
+        with cluster, distributed.Client(cluster) as client:
             yield client
         return
     try:
@@ -68,6 +73,22 @@ def connect(workers: int | None = None, address: str | None = None):
         raise RenderError(f"cannot reach the Dask scheduler at {address}: {error}") from None
     with client:
         yield client
+
+
+@contextlib.contextmanager
+def _ctrl_c_ignored():
+    """Worker processes started in here ignore SIGINT: Ctrl-C reaches the
+    terminal's whole process group, and it is the client that stops the
+    job (cancelling its tasks and closing the cluster), not each worker
+    with a traceback of its own."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 # ---- what travels ----------------------------------------------------------
@@ -173,6 +194,10 @@ def _render_tile(scene: Scene, render_keys: dict, seed: int, camera, first: int,
 
 # ---- on the client -------------------------------------------------------------
 
+def _count(n: int, unit: str) -> str:
+    return f"{n} {unit}{'' if n == 1 else 's'}"
+
+
 def worker_count(client) -> int:
     return max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
 
@@ -230,14 +255,11 @@ class _Job:
         """Time per task overall and per worker."""
         elapsed = time.perf_counter() - self.start
         count = sum(len(t) for t in self.times.values())
-        lines = [f"cluster: {self._count(count)} on {len(self.times)} workers in {elapsed:.2f} s "
+        lines = [f"cluster: {_count(count, self.unit)} on {_count(len(self.times), 'worker')} in {elapsed:.2f} s "
                  f"({elapsed / max(count, 1):.3f} s per {self.unit})"]
         for worker, seconds in sorted(self.times.items()):
-            lines.append(f"  {worker}: {self._count(len(seconds))}, {sum(seconds) / len(seconds):.3f} s each")
+            lines.append(f"  {worker}: {_count(len(seconds), self.unit)}, {sum(seconds) / len(seconds):.3f} s each")
         return "\n".join(lines)
-
-    def _count(self, n: int) -> str:
-        return f"{n} {self.unit}{'' if n == 1 else 's'}"
 
     def report(self) -> None:
         if self.progress:

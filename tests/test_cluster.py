@@ -6,6 +6,7 @@ workers; and Dask left alone without --workers/--cluster."""
 import collections
 import logging
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -107,9 +108,12 @@ def test_a_still_assembled_from_row_tiles_equals_the_local_render(client):
 
 def test_render_on_a_cluster_from_the_command_line_equals_the_local_render(client, tmp_path):
     (tmp_path / "fly.frac").write_text(SCENE)
-    farmed = fractalc_cli("render", "fly.frac", "-o", "farm.exr", "--samples", 4, "-q",
+    farmed = fractalc_cli("render", "fly.frac", "-o", "farm.exr", "--samples", 4,
                           "--cluster", client.scheduler.address, cwd=tmp_path)
     assert farmed.returncode == 0, farmed.stderr
+    # the summary: 24 rows in tiles of 4 (4 tiles per worker, whole lane blocks), and each worker's share
+    assert re.search(r"^cluster: 6 tiles on [12] workers? in ", farmed.stderr, re.M), farmed.stderr
+    assert sum(int(n) for n in re.findall(r"^  tcp://\S+: (\d+) tiles?, ", farmed.stderr, re.M)) == 6
     fractalc.loads(SCENE).render(samples=4).save(str(tmp_path / "local.exr"))
     np.testing.assert_array_equal(pixels(tmp_path / "farm.exr"), pixels(tmp_path / "local.exr"))
 
