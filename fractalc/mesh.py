@@ -140,6 +140,10 @@ class Grid:
         counts = tuple(int(math.ceil((u - l) / spacing - 1e-9)) + 1 for l, u in zip(lower, upper))
         return Grid(lower, spacing, counts)
 
+    @property
+    def upper(self) -> np.ndarray:
+        return self.lower + self.spacing * np.subtract(self.counts, 1)
+
     def planes_per_slab(self, chunk_points: int = CHUNK_POINTS) -> int:
         """z-planes evaluated per kernel call: as many as fit in a chunk."""
         return max(1, chunk_points // (self.counts[0] * self.counts[1]))
@@ -189,8 +193,11 @@ def mesh(scene, resolution: int = DEFAULT_RESOLUTION, bounds=None, progress: boo
     level = grid.spacing * LEVEL_CELLS
     vertices, faces = _march(scene, grid, level, progress, chunk_points)
     normals = _normals(scene, vertices, grid.spacing, chunk_points)
-    vertices -= np.float32(level) * normals
-    np.clip(vertices, grid.lower, grid.lower + grid.spacing * np.subtract(grid.counts, 1), out=vertices)
+    # back onto the surface; a cap between the padding and the grid's edge goes onto the edge
+    for start in range(0, len(vertices), chunk_points):     # in blocks: no mesh-sized temporaries
+        block = vertices[start:start + chunk_points]
+        block -= np.float32(level) * normals[start:start + chunk_points]
+        np.clip(block, grid.lower.astype(np.float32), grid.upper.astype(np.float32), out=block)
     return Mesh(vertices, faces, normals)
 
 
@@ -232,13 +239,11 @@ def _march(scene, grid: Grid, level: float, progress: bool, chunk_points: int) -
     finally:
         bar.close()
     if not vertex_parts:
-        raise ValueError("no surface inside the bounds (the distance has the same sign everywhere)")
-    # padded indices: sample (i, j) is at padded (i + 1, j + 1); a cap
-    # between the padding and the grid's edge goes onto the edge
+        raise ValueError("no surface inside the bounds (the distance is on one side of the surface everywhere)")
+    # padded indices: sample (i, j) is at padded (i + 1, j + 1)
     vertices = np.concatenate(vertex_parts)
     del vertex_parts[:]
     vertices -= np.float32([1, 1, 0])
-    np.clip(vertices, 0, np.subtract(grid.counts, 1).astype(np.float32), out=vertices)
     vertices *= np.float32(grid.spacing)
     vertices += grid.lower.astype(np.float32)
     faces = np.concatenate(face_parts)
