@@ -240,8 +240,8 @@ class _Job:
                 try:
                     done = future.result()
                 except KilledWorker:
-                    raise RenderError(f"{tag}: the workers running it died each time (see the workers' logs)") \
-                        from None
+                    raise RenderError(f"{self.unit} {tag}: the workers running it died each time "
+                                      "(see the workers' logs)") from None
                 take(tag, done.value)
                 self.times[done.worker].append(done.seconds)
                 self.bar.update(1)
