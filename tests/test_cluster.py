@@ -155,6 +155,7 @@ def test_a_worker_killed_mid_job_has_its_frames_rendered_elsewhere_each_written_
         # worker in the middle of its next frame
         if not killed:
             busy = [worker for worker, keys in client.processing().items() if keys]
+            assert busy, "no frame was in flight to lose"
             pids = client.run(os.getpid, workers=busy[:1])
             killed.extend(pids.values())
             os.kill(killed[0], signal.SIGKILL)
