@@ -199,7 +199,7 @@ def _count(n: int, unit: str) -> str:
 
 
 def worker_count(client) -> int:
-    return max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
+    return max(1, len(client.nthreads()))     # worker address -> its threads
 
 
 class _Job:
@@ -211,6 +211,8 @@ class _Job:
         from tqdm import tqdm
         self.client, self.unit, self.progress = client, unit, progress
         self.workers = worker_count(client)
+        if progress and not client.nthreads():     # Dask holds the tasks until one joins
+            print("cluster: no workers yet; waiting for one to join the scheduler", file=sys.stderr)
         self.limit = TASKS_PER_WORKER * self.workers
         self.times: dict[str, list[float]] = defaultdict(list)
         self.start = time.perf_counter()
