@@ -169,9 +169,10 @@ def _on_worker(spec: SceneSpec, work: Callable[[Scene, dict], object]) -> Done:
     raise RenderError(message)
 
 
-def _frame_task(spec: SceneSpec, path, time: float, seed: int) -> Done:
+def _frame_task(spec: SceneSpec, path, at: float, seed: int) -> Done:
+    """The frame at time `at` on the camera `path`."""
     from .animate import render_frame
-    return _on_worker(spec, lambda scene, keys: render_frame(scene, path, time, seed, keys))
+    return _on_worker(spec, lambda scene, keys: render_frame(scene, path, at, seed, keys))
 
 
 def _tile_task(spec: SceneSpec, seed: int, camera, first: int, count: int) -> Done:
