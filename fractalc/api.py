@@ -242,7 +242,7 @@ class Scene:
         the current params), or None for an unbounded scene (a ground
         plane, repetition, a warp)."""
         scene_ir = lower(self.checked)
-        if scene_ir.bound is None or scene_ir.bound.sphere is None:
+        if scene_ir.bound is None or scene_ir.bound.sphere is None or scene_ir.bound.half_spaces:
             return None
         centre, radius = scene_ir.bound.sphere
         double = self.precision == "double"

@@ -72,3 +72,4 @@ def test_the_scene_bound_is_computed_on_the_device():
     centre, radius = fractalc.loads("param r = 1.5 in [1, 2]\nscene sphere(r).translate((1, 2, 3))").bound()
     assert np.allclose(centre, (1, 2, 3)) and abs(radius - 1.5) < 1e-6
     assert fractalc.loads("scene plane()").bound() is None
+    assert fractalc.loads("scene sphere(1) | plane(offset: -2)").bound() is None     # a ground: unbounded
