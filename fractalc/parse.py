@@ -26,9 +26,10 @@ _CLOSING = set(_OPENING.values())
 _OPERAND = {"NAME", "NUMBER", "DOT"}
 _OPERAND_END = {"NAME", "NUMBER", "RPAR", "RSQB"}   # a '-' after these is binary
 
-# Lark counts lines by "\n" alone; a lone "\r" is a line break too
-# (errors.LINE_BREAK), so it reaches Lark as "\n", which keeps every column.
-_LONE_CR = re.compile(r"\r(?!\n)")
+# Lark counts lines by "\n" alone; "\r\n" and a lone "\r" are line breaks
+# too (errors.LINE_BREAK), so each reaches the parsers as "\n": every column
+# is kept, and an unexpected line break is placed just after its line.
+_LINE_BREAK = re.compile(r"\r\n?")
 
 # Token names as a user would say them, for "expected ..." messages.
 _TOKEN_WORDS = {
@@ -211,7 +212,7 @@ def _describe(token: Token) -> str:
 
 
 def _expected_words(expected) -> str:
-    words = sorted({_TOKEN_WORDS.get(e, f"'{e.lower()}'") for e in expected if not e.startswith("__")})
+    words = sorted({_TOKEN_WORDS.get(e, f"'{e.lstrip('_').lower()}'") for e in expected if not e.startswith("__")})
     if len(words) > 4:
         words = words[:4] + ["..."]
     return ", ".join(words)
@@ -249,7 +250,7 @@ _SEPARATORS = frozenset({",", "\n"})
 # The fast parser hands anything this deep to Lark, which reports the
 # nesting limit exactly where it is passed.
 _FAST_DEPTH = MAX_NESTING - 8
-_FIRST_TOKENS = 1 << 16
+_FIRST_TOKENS = 1 << 12
 
 
 def _tokens(source: str, most: int | None) -> tuple[list, list, list, list]:
@@ -300,7 +301,7 @@ class _FastParser:
     builds the AST as it reads, with Lark's spans (a node's span runs from
     its first to its last token, brackets around a whole operand left out).
     It takes only input Lark takes, and stops (`_Stop`) at anything else:
-    a mistake, nesting near the limit, a keyword run into a name."""
+    a mistake or nesting near the limit."""
 
     def __init__(self, source: str):
         self.source = source
@@ -560,7 +561,7 @@ def parse(text: str, path: str = "<string>") -> ast.Program:
     if len(text.encode("utf-8", errors="replace")) > MAX_FILE_BYTES:
         raise SceneError([diagnostic(path, text, Span(1, 1, 1, 2),
                                      f"the scene file is larger than {MAX_FILE_BYTES // (1024 * 1024)} MB")])
-    source = _LONE_CR.sub("\n", text)
+    source = _LINE_BREAK.sub("\n", text)
     reader = _FastParser(source)
     collecting = gc.isenabled()
     gc.disable()     # millions of new nodes, none of them garbage: collections only cost time
