@@ -18,6 +18,7 @@ import weakref
 
 import numpy as np
 from dataclasses import dataclass, fields
+from functools import lru_cache
 from typing import Callable, Union
 
 
@@ -39,8 +40,13 @@ class _Interned(type):
 
     def __call__(cls, *args, **kwargs):
         made = super().__call__(*args, **kwargs)
-        key = (cls,) + tuple(_key(getattr(made, f.name)) for f in fields(made))
+        key = (cls,) + tuple(_key(getattr(made, name)) for name in _field_names(cls))
         return _NODES.setdefault(key, made)
+
+
+@lru_cache(maxsize=None)
+def _field_names(cls) -> tuple[str, ...]:
+    return tuple(f.name for f in fields(cls))
 
 
 def _key(value):
