@@ -358,3 +358,12 @@ def test_generated_material_names_cannot_be_declared():
     red, grey = column[6], column[10]            # the coloured sphere, the one below it
     assert red[0] > 4 * max(red[1], red[2])
     assert np.allclose(grey, grey[0], rtol=0.01)  # the default material: grey, not the file's green
+
+
+@pytest.mark.parametrize("normals", ["tetrahedral", "central"])
+def test_normals_stay_finite_deep_inside_a_far_plane(normals):
+    """Estimates near float's largest (a point 3e38 inside a plane): the
+    normal's differences must not overflow (found by the fuzzer)."""
+    scene = fractalc.loads(f"scene sphere() | plane(offset: 3e38)\nrender {{ width: 16, height: 12, normals: {normals} }}")
+    image = scene.render()
+    assert np.isfinite(image.normal).all() and np.isfinite(image.rgba).all()

@@ -7,7 +7,9 @@ vec3 tetrahedral_normal(vec3 p, real h, __constant scalar *params) {
     real b = distance_estimate(v3(p.x - h, p.y - h, p.z + h), params);
     real c = distance_estimate(v3(p.x - h, p.y + h, p.z - h), params);
     real d = distance_estimate(v3(p.x + h, p.y + h, p.z + h), params);
-    return v3_normalize(v3(a - b - c + d, -a - b + c + d, -a + b - c + d));
+    // differences first: a sum of two estimates near float's largest (a
+    // point deep inside a far plane) would overflow
+    return v3_normalize(v3((a - b) + (d - c), (c - a) + (d - b), (b - a) + (d - c)));
 }
 
 vec3 central_normal(vec3 p, real h, __constant scalar *params) {
