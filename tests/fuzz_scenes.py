@@ -55,6 +55,9 @@ class Range:
 
 ANY = Range()
 POSITIVE = Range(0, None, lo_open=True)
+# sizes a distance squares (docs/language.md, "Limits")
+COORDINATE = Range(-1e18, 1e18)
+SIZE = Range(0, 1e18, lo_open=True)
 NON_NEGATIVE = Range(0, None)
 UNIT = Range(0, 1)
 COLOR = Range(0, 1000)
@@ -65,9 +68,9 @@ PRIMITIVES = {
     "sphere": (("radius", "num", POSITIVE),),
     "box": (("size", "size", POSITIVE),),
     "plane": (("normal", "vec3", Range(nonzero=True)), ("offset", "num", ANY)),
-    "torus": (("major", "num", POSITIVE), ("minor", "num", POSITIVE)),
+    "torus": (("major", "num", SIZE), ("minor", "num", SIZE)),
     "cylinder": (("radius", "num", POSITIVE), ("height", "num", POSITIVE)),
-    "capsule": (("a", "vec3", ANY), ("b", "vec3", ANY), ("radius", "num", POSITIVE)),
+    "capsule": (("a", "vec3", COORDINATE), ("b", "vec3", COORDINATE), ("radius", "num", SIZE)),
 }
 FRACTALS = {
     "mandelbulb": (("power", "num", Range(1, 32)), ("iterations", "int", ITERATIONS),
@@ -177,7 +180,7 @@ def outside(rng: random.Random, r: Range) -> float | None:
     if r.lo is not None:
         choices += [r.lo if r.lo_open else r.lo - rng.choice([1, 0.5, 1e-3]), r.lo - 1e6]
     if r.hi is not None:
-        choices += [r.hi if r.hi_open else r.hi + rng.choice([1, 0.5, 1e-3]), r.hi * 10 + 1]
+        choices += [r.hi if r.hi_open else r.hi + rng.choice([1, 0.5, 1e-3]) * max(1.0, abs(r.hi) * 1e-6), r.hi * 10 + 1]
     if r.whole:
         choices.append(((r.lo or 0) + (r.hi if r.hi is not None else 2)) / 2 + 0.5)
     choices = [c for c in choices if not _contains(r, c)]
@@ -277,7 +280,7 @@ class _Generator:
         self.params.append((name, default, lo, hi))
         if self.take_defect(0.05):
             self.made = "param's default outside its range"
-            self.decls.append(f"param {name} = {self.mark(literal(rng, hi + 1))} in [{lo!r}, {hi!r}]")
+            self.decls.append(f"param {name} = {self.mark(literal(rng, hi + max(1.0, abs(hi) * 1e-6)))} in [{lo!r}, {hi!r}]")
         else:
             self.decls.append(f"param {name} = {literal(rng, default)} in [{literal(rng, lo)}, {literal(rng, hi)}]")
         return rng.choice([name, f"({name})", f"{name} * 1", f"max({name}, {name})"])

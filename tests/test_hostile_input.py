@@ -367,3 +367,14 @@ def test_normals_stay_finite_deep_inside_a_far_plane(normals):
     scene = fractalc.loads(f"scene sphere() | plane(offset: 3e38)\nrender {{ width: 16, height: 12, normals: {normals} }}")
     image = scene.render()
     assert np.isfinite(image.normal).all() and np.isfinite(image.rgba).all()
+
+
+@pytest.mark.parametrize("text, key", [("scene capsule((-0.6, 2.9, 1e30), (0, 0, 1))", "'a' of 'capsule'"),
+                                       ("scene capsule(radius: 1e30)", "'radius' of 'capsule'"),
+                                       ("scene torus(1e30)", "'major' of 'torus'")])
+def test_shapes_whose_distance_squares_a_huge_size_are_refused_at_the_value(text, key):
+    """A capsule end at 1e30 gave distance +inf everywhere (fuzz seed 5 case 3209)."""
+    with pytest.raises(fractalc.SceneError, match=key):
+        fractalc.loads(text)
+    assert np.isfinite(fractalc.loads("scene capsule((0, 0, -1e17), (0, 0, 1e17)) | torus(1e17, 1e17)")
+                       .distance([[0, 0, 0], [1, 2, 3]])).all()

@@ -19,7 +19,7 @@ real sd_plane(vec3 p, vec3 normal, real offset) {
     return v3_dot(p, v3_normalize(normal)) - offset;
 }
 
-//: shape torus(major: num = 1 >0, minor: num = 0.25 >0)
+//: shape torus(major: num = 1 >0 <=1e18, minor: num = 0.25 >0 <=1e18)
 real sd_torus(vec3 p, real major, real minor) {
     real ring = sqrt(p.x * p.x + p.y * p.y) - major;
     return sqrt(ring * ring + p.z * p.z) - minor;
@@ -33,7 +33,7 @@ real sd_cylinder(vec3 p, real radius, real height) {
     return min(max(dx, dz), 0.0f) + sqrt(ox * ox + oz * oz);
 }
 
-//: shape capsule(a: vec3 = (0, 0, -0.5), b: vec3 = (0, 0, 0.5), radius: num = 0.25 >0)
+//: shape capsule(a: vec3 = (0, 0, -0.5) -1e18..1e18, b: vec3 = (0, 0, 0.5) -1e18..1e18, radius: num = 0.25 >0 <=1e18)
 real sd_capsule(vec3 p, vec3 a, vec3 b, real radius) {
     vec3 pa = v3_sub(p, a), ba = v3_sub(b, a);
     real length2 = v3_dot(ba, ba);
