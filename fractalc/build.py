@@ -48,7 +48,7 @@ def driver_cache_dir() -> str:
 def _own_driver_cache() -> None:
     """Point PoCL at fractalc's kernel cache (before the driver loads) and
     clear it if a process died while using it."""
-    os.environ.setdefault("POCL_CACHE_DIR", str(cache_dir() / "pocl"))
+    os.environ["POCL_CACHE_DIR"] = driver_cache_dir()
     markers = cache_dir() / "building"
     for marker in markers.glob("*") if markers.is_dir() else ():
         if not _alive(marker.name):

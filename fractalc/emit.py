@@ -83,7 +83,7 @@ class _FunctionWriter:
 
     def block(self, roots, indent: str) -> None:
         """Write the statements computing `roots` (a node or a tuple)."""
-        self.statements(schedule(roots if isinstance(roots, tuple) else (roots,)), indent)
+        self.statements(schedule(roots if isinstance(roots, tuple) else (roots,), self.varying), indent)
 
     def statements(self, statements, indent: str) -> None:
         for statement in statements:

@@ -169,10 +169,7 @@ def bounds_of(scene, bounds=None) -> tuple[np.ndarray, np.ndarray]:
         if not np.all(values[:3] < values[3:]):
             raise ValueError("bounds: each minimum must be less than its maximum")
         return values[:3], values[3:]
-    from .lower import lower
-    scene_bound = lower(scene.checked).bound
-    # a ground plane's half-space reaches past any sphere
-    sphere = scene.bound() if scene_bound is not None and not scene_bound.half_spaces else None
+    sphere = scene.bound()     # None for a ground plane, repetition or a warp
     if sphere is None:
         raise ValueError(f"{scene.checked.file} is unbounded (a plane, repetition or warp): "
                          "give the bounds of the part to mesh")

@@ -63,9 +63,9 @@ def varying(roots) -> set:
 
 
 class _Scheduler:
-    def __init__(self, roots: tuple):
+    def __init__(self, roots: tuple, per_ray: set):
         self.levels = ir.state_levels(roots)     # the loop levels whose States a node depends on
-        self.varying = varying(roots)
+        self.varying = per_ray
 
     def dependencies(self, node) -> tuple:
         """What must be computed before `node` in its own block."""
@@ -114,6 +114,7 @@ class _Scheduler:
         return IfBlock(branch, then, tuple(self.block(branch.otherwise, set(visible))))
 
 
-def schedule(roots: tuple) -> tuple[Statement, ...]:
-    """The statements computing `roots`, in order."""
-    return tuple(_Scheduler(roots).block(roots, set()))
+def schedule(roots: tuple, per_ray: set) -> tuple[Statement, ...]:
+    """The statements computing `roots`, in order; `per_ray` is
+    `varying(roots)` (or a superset), which the caller has already."""
+    return tuple(_Scheduler(roots, per_ray).block(roots, set()))
