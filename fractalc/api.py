@@ -29,7 +29,8 @@ from .source import read_scene_file
 from .write import write
 
 PRECISIONS = ("float", "double")
-_RUNTIME_KEYS = {"width", "height", "samples"}   # change without rebuilding
+# change without rebuilding (exposure and tonemap: only PNG writing reads them)
+_RUNTIME_KEYS = {"width", "height", "samples", "exposure", "tonemap"}
 SCENE_TEXT_LIMIT = 64 * 1024   # longer scene text is left out of the metadata (its sha256 and path stay)
 
 

@@ -778,7 +778,8 @@ RENDER_KEYS = _keys(
     _P("ao_method", "word:normal|steps"), _P("dither", "num", None, "0..1"),
     _P("overrelax", "num", None, "1..1.99"),
     _P("epsilon_scale", "num", None, ">0", f"<={MAX_EPSILON_SCALE:g}"),
-    _P("normals", "word:tetrahedral|central"), _P("fast_math", "word:auto|on|off"))
+    _P("normals", "word:tetrahedral|central"), _P("fast_math", "word:auto|on|off"),
+    _P("exposure", "num", None, "-20..20"), _P("tonemap", "word:none|reinhard|aces"))
 
 
 def check(program: ast.Program) -> CheckedScene:

@@ -172,6 +172,8 @@ class RenderSettings:
     epsilon_scale: float = 1.0       # multiplies the hit threshold (a quality knob)
     normals: str = "tetrahedral"     # finite differences: tetrahedral (4 evaluations) or central (6)
     fast_math: str = "auto"          # on: native_ transcendental functions; auto: on CPUs
+    exposure: float = 0.0            # stops: PNG colour times 2^exposure (EXR stays as rendered)
+    tonemap: str = "none"            # PNG tone curve: none (clip) | reinhard | aces
     aovs: tuple[str, ...] = ()       # passes beyond the default channels (run.PASSES); not a file key
 
 

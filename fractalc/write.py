@@ -2,8 +2,10 @@
 
 EXR: float (or half), linear, channels R G B A Z N.x N.y N.z steps and
 the passes asked for (docs/compositing.md), with the OpenEXR standard
-`worldToCamera` and `worldToNDC` matrices. Anything else (PNG, ...): sRGB
-RGBA, 8 or 16 bits, straight alpha. Both carry the metadata (`fractalc:`
+`worldToCamera` and `worldToNDC` matrices: the scene's radiance as
+rendered, whatever the exposure and tone curve. Anything else (PNG, ...):
+the colour scaled by the exposure, through the tone curve, in sRGB RGBA,
+8 or 16 bits, straight alpha (docs/looks.md). Both carry the metadata (`fractalc:`
 names) where the format has room for it (EXR header, PNG text).
 
 The file appears atomically: it is written beside its destination under a
@@ -37,6 +39,23 @@ MATRICES = {"worldtocamera": "worldToCamera", "worldtoNDC": "worldToNDC"}
 FLOAT_ONLY = ("Z", "P.x", "P.y", "P.z")
 
 
+TONE_CURVES = ("none", "reinhard", "aces")
+
+
+def tone_mapped(linear: np.ndarray, exposure: float = 0.0, curve: str = "none") -> np.ndarray:
+    """Scene-linear colour as display-linear colour in [0, 1]: scaled by
+    2^exposure, then through the tone curve (none: clipped; reinhard:
+    x / (1 + x) per channel; aces: Narkowicz's fit of the ACES film curve)."""
+    x = np.maximum(linear * np.float32(2.0 ** exposure), 0.0)
+    if curve == "reinhard":
+        x = x / (1.0 + x)
+    elif curve == "aces":
+        x = x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14)
+    elif curve != "none":
+        raise ValueError(f"tonemap must be one of {', '.join(TONE_CURVES)}, not {curve!r}")
+    return np.clip(x, 0.0, 1.0)
+
+
 def linear_to_srgb(linear: np.ndarray) -> np.ndarray:
     x = np.clip(linear, 0.0, 1.0)
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
@@ -64,11 +83,13 @@ def _interleaved(planes: dict[str, np.ndarray]) -> np.ndarray:
     return np.stack(ordered, axis=-1).astype(np.float32, copy=False)
 
 
-def _srgb_rgba(planes: dict[str, np.ndarray], bits: int, transparent: bool) -> np.ndarray:
+def _srgb_rgba(planes: dict[str, np.ndarray], bits: int, transparent: bool,
+               exposure: float, curve: str) -> np.ndarray:
     """sRGB RGBA in `bits`-bit integers, converted in strips of rows (the
-    float temporaries of the conversion stay a strip's size). Alpha is
-    straight: a transparent render's premultiplied colour is divided by its
-    coverage; an opaque render (its background fills the misses) is opaque."""
+    float temporaries of the conversion stay a strip's size), the colour
+    tone-mapped (`tone_mapped`). Alpha is straight: a transparent render's
+    premultiplied colour is divided by its coverage; an opaque render (its
+    background fills the misses) is opaque."""
     height, width = planes["A"].shape
     top_value = float(2 ** bits - 1)
     pixels = np.empty((height, width, 4), dtype=np.uint16 if bits == 16 else np.uint8)
@@ -79,7 +100,7 @@ def _srgb_rgba(planes: dict[str, np.ndarray], bits: int, transparent: bool) -> n
         if transparent:
             covered = alpha > 0
             rgb = np.where(covered[..., None], rgb / np.where(covered, alpha, 1)[..., None], 0)
-        rgba = np.concatenate([linear_to_srgb(rgb), alpha[..., None]], axis=-1)
+        rgba = np.concatenate([linear_to_srgb(tone_mapped(rgb, exposure, curve)), alpha[..., None]], axis=-1)
         pixels[rows] = np.round(rgba * top_value)
     return pixels
 
@@ -159,7 +180,8 @@ def write(path: str, planes: dict[str, np.ndarray], metadata: dict[str, str], ha
     order, R G B A Z first) to `path` (format from its extension). EXR:
     `half` stores all channels but FLOAT_ONLY as half floats, `compression`
     is one of COMPRESSIONS. Other formats: RGBA of `bits` (8 or 16) bits
-    where the format has them."""
+    where the format has them, the colour tone-mapped as the metadata's
+    `render.exposure` and `render.tonemap` say (default: as rendered)."""
     import OpenImageIO as oiio
     if compression not in COMPRESSIONS:
         raise ValueError(f"compression must be one of {', '.join(COMPRESSIONS)}, not {compression!r}")
@@ -192,7 +214,8 @@ def write(path: str, planes: dict[str, np.ndarray], metadata: dict[str, str], ha
         spec.attribute(name, value)
     spec.attribute("Software", f"fractalc {metadata.get('version', '')}".strip())
     transparent = metadata.get("render.background") == "transparent"
-    pixels = _interleaved(planes) if exr else _srgb_rgba(planes, bits, transparent)
+    exposure, curve = float(metadata.get("render.exposure", 0.0)), metadata.get("render.tonemap", "none")
+    pixels = _interleaved(planes) if exr else _srgb_rgba(planes, bits, transparent, exposure, curve)
     with replacing(path) as temporary:
         output = oiio.ImageOutput.create(temporary)
         if output is None or not output.open(temporary, spec):

@@ -1,0 +1,84 @@
+"""Looks (docs/looks.md): exposure and the tone curve of PNG output. The
+background of a scene is a known radiance, so the PNG's value of a missed
+pixel is known exactly. Renders are 16 x 12."""
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+import fractalc
+
+SCENE = """
+scene sphere(0.3)
+camera { position: (0, -5, 0), target: (0, 0, 0), fov: 40 }
+render { width: 16, height: 12, background: (0.2, 0.2, 0.2) }
+"""
+
+
+def srgb(x: float) -> float:
+    return 12.92 * x if x <= 0.0031308 else 1.055 * x ** (1 / 2.4) - 0.055
+
+
+def corner(path) -> np.ndarray:
+    file = oiio.ImageInput.open(str(path))
+    pixels = np.asarray(file.read_image(oiio.FLOAT))
+    file.close()
+    return pixels[0, 0, :3]
+
+
+@pytest.mark.parametrize("keys, display", [
+    ({}, 0.2),
+    ({"exposure": 1}, 0.4),
+    ({"exposure": -2}, 0.05),
+    ({"exposure": 3}, 1.0),                                           # 1.6: clipped
+    ({"tonemap": "reinhard"}, 0.2 / 1.2),
+    ({"tonemap": "reinhard", "exposure": 3}, 1.6 / 2.6),              # no longer clipped
+    ({"tonemap": "aces"}, 0.2 * (2.51 * 0.2 + 0.03) / (0.2 * (2.43 * 0.2 + 0.59) + 0.14)),
+])
+def test_png_shows_the_radiance_times_two_to_the_exposure_through_the_curve(tmp_path, keys, display):
+    scene = fractalc.loads(SCENE)
+    image = scene.render(**keys)
+    image.save(str(tmp_path / "a.png"))
+    assert np.abs(corner(tmp_path / "a.png") - round(srgb(display) * 255) / 255).max() < 1e-6
+    image.save(str(tmp_path / "a.exr"))
+    assert np.all(corner(tmp_path / "a.exr") == np.float32(0.2)), "EXR stays the radiance as rendered"
+
+
+def test_tone_curves_keep_order_and_roll_highlights_off():
+    from fractalc.write import tone_mapped
+    radiance = np.geomspace(1e-3, 1e3, 200)
+    reinhard, aces = tone_mapped(radiance, 0.0, "reinhard"), tone_mapped(radiance, 0.0, "aces")
+    for shown in (reinhard, aces):
+        assert np.all(np.diff(shown) >= 0) and shown[0] > 0
+    assert reinhard.max() < 1.0, "Reinhard never reaches white"
+    # the ACES fit reaches white at 7.245 (0.08 x^2 - 0.56 x - 0.14 = 0)
+    assert np.all(aces[radiance > 7.25] == 1.0) and np.all(aces[radiance < 7.24] < 1.0)
+
+
+@pytest.mark.parametrize("entry, message", [
+    ("tonemap: filmic", "'tonemap' must be 'none' or 'reinhard' or 'aces'"),
+    ("exposure: 25", "'exposure' of 'render' must be between -20 and 20, not 25"),
+])
+def test_bad_tone_keys_are_errors_at_the_value(entry, message):
+    with pytest.raises(fractalc.SceneError) as caught:
+        fractalc.loads(f"scene sphere()\nrender {{ {entry} }}\n")
+    assert message in str(caught.value)
+    assert ":2:" in str(caught.value)
+
+
+def test_exposure_and_tonemap_do_not_rebuild_the_kernel():
+    scene = fractalc.loads(SCENE)
+    scene.render()
+    built = len(scene._programs)
+    scene.render(exposure=2, tonemap="aces")
+    assert len(scene._programs) == built
+
+
+def test_every_example_in_the_looks_page_checks():
+    import pathlib
+    import re
+    page = (pathlib.Path(__file__).parent.parent / "docs" / "looks.md").read_text()
+    blocks = re.findall(r"```frac\n(.*?)```", page, re.S)
+    assert blocks
+    for block in blocks:
+        fractalc.loads(block, path="docs/looks.md")
