@@ -250,10 +250,20 @@ def command_bench(args) -> int:
             raise UsageError(f"{name} must be at least 1")
     _require_writable(*((name, path, path) for name, path in
                         (("--json", args.json), ("--csv", args.csv), ("--plot", args.plot))))
+    if args.count:
+        if args.sweep or args.still:
+            raise UsageError("--count counts one render of the file's view; it goes without --sweep and --still")
     if not args.sweep:
         for name, value in (("--csv", args.csv), ("--plot", args.plot), ("--vary", args.vary)):
             if value:
                 raise UsageError(f"{name} goes with --sweep")
+        if args.count:
+            from .count import count, table as count_table
+            counts = count(_load(args), width, height)
+            print(count_table(counts))
+            if args.json:
+                _write_text_atomically(args.json, json.dumps(counts.as_dict(), indent=2) + "\n")
+            return 0
         scene = _load(args)
         result = bench(scene, frames=args.frames, width=width, height=height, repeat=args.repeat or 1,
                        use_cache=not args.no_cache, still=args.still)
@@ -511,6 +521,9 @@ def _parser() -> argparse.ArgumentParser:
     bench_.add_argument("--csv", metavar="FILE", help="with --sweep: also write the rows as CSV")
     bench_.add_argument("--plot", metavar="FILE.png", help="with --sweep: also plot time against error "
                                                           "(needs matplotlib)")
+    bench_.add_argument("--count", action="store_true",
+                        help="count distance evaluations per pixel by purpose in one render of the file's "
+                             "view (an instrumented kernel), and formula iterations per evaluation")
     bench_.add_argument("--no-cache", action="store_true", help="compile the kernel even if it is cached")
     key_options(bench_)
     device_options(bench_)

@@ -34,6 +34,7 @@ MAX_INVERSE_SQUARE = 1e8
 class Target:
     lanes: int = 8          # rays per work-item: 1 (GPU) or 8/16 (CPU vector lanes)
     double: bool = False    # `real` is double
+    count: bool = False     # the counting build's `#if FEATURE_COUNT` lines (fractalc/count.py)
 
 
 def literal(value: float) -> str:
@@ -636,7 +637,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
     lib = library()
     scene = scene_ir.scene
     distance = function_source(scene_ir.distance, "real distance_estimate(vec3 p, __constant scalar *params)")
-    on = features(scene_ir)
+    on = {**features(scene_ir), "COUNT": target.count}
     shade, shading_needs = _shade_function(scene_ir, on)
     # the bound serves the march (not with glow) and the shadow rays
     shadows = any(light.shadows != "none" for light in scene.lights)
@@ -664,7 +665,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         _library_text(scene_functions),
         "// ---- the scene " + "-" * 60,
         distance, _surface_function(scene_ir), bound,
-        _library_text(shading_functions),
+        resolve_features(_library_text(shading_functions), on),
         f"vec3 estimate_normal(vec3 p, real h, __constant scalar *params) {{\n"
         f"    return {normal_method}(p, h, params);\n}}",
         shade,

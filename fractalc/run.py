@@ -153,6 +153,33 @@ def render(program, device: Device, frame: Frame, params, lanes: int, double: bo
     return _without_padding(image, height, width)
 
 
+def counted_render(program, device: Device, frame: Frame, params, lanes: int, double: bool,
+                   slots: int, channels: int = len(CHANNELS)) -> np.ndarray:
+    """Run the counting build of fractalc/count.py over `frame` in one
+    launch (work-item (i, j) renders block (i, j), and owns its `slots`
+    counters per ray after the params); the counters, one row per
+    work-item, each slot summed over its rays."""
+    import pyopencl as cl
+    kernel = cl.Kernel(program, "render")
+    block_width, block_height = lane_block(lanes)
+    group = device.work_group
+    step_x, step_y = (block_width * group[0], block_height * group[1]) if group else (block_width, block_height)
+    pitch, rows = _round_up(frame.width, step_x), _round_up(frame.height, step_y)
+    items = (pitch // block_width) * (rows // block_height)
+    base = max(len(params), 1)
+    state = np.zeros(base + items * slots * lanes, dtype=_scalar(double))
+    state[:len(params)] = params
+    with _guard("counting distance evaluations"):
+        flags = cl.mem_flags
+        state_buffer = cl.Buffer(device.context, flags.READ_WRITE | flags.COPY_HOST_PTR, hostbuf=state)
+        out = cl.Buffer(device.context, flags.WRITE_ONLY, rows * pitch * channels * 4)
+        kernel(device.queue, (pitch // block_width, rows // block_height), group, out, state_buffer,
+               _constant_buffer(device, frame.camera, double), np.int32(frame.width), np.int32(frame.height),
+               np.int32(0), np.int32(0), np.int32(pitch), np.int32(frame.samples), np.uint32(frame.seed))
+        cl.enqueue_copy(device.queue, state, state_buffer, is_blocking=True)
+    return state[base:].reshape(items, slots, lanes).sum(axis=2)
+
+
 def render_rows(program, device: Device, frame: Frame, params, lanes: int, double: bool,
                 first: int, count: int, channels: tuple[str, ...] = CHANNELS) -> np.ndarray:
     """Rows `first` to `first + count - 1` of `frame` (a render farm's tile,

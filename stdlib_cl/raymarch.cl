@@ -84,6 +84,9 @@ march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real 
     active = active & in_bound;
 #endif
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
+#if FEATURE_COUNT
+        count_evaluations(march_purpose(params), active, 1.0f, params);
+#endif
         real d = distance_estimate(v3_add(origin, v3_scale(dir, r.t)), params);
         r.steps = r.steps + SELECT((real)0.0f, (real)1.0f, active);
 #if FEATURE_OVERRELAX
@@ -190,6 +193,9 @@ vec3 hit_normal(vec3 origin, vec3 dir, march_result m, scalar pixel_angle, __con
     vec3 normal = v3((real)0.0f, 0.0f, 0.0f);
     if (ANY(m.hit)) {
         vec3 p = v3_add(origin, v3_scale(dir, m.t));
+#if FEATURE_COUNT
+        count_scope(m.hit, params);
+#endif
         normal = v3_select(normal, estimate_normal(p, hit_threshold(m.t, pixel_angle), params), m.hit);
     }
     return normal;
@@ -226,11 +232,17 @@ vec3 reflected_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 se
             return color;
         dir = v3_sub(dir, v3_scale(normal, 2.0f * v3_dot(dir, normal)));
         vec3 start = v3_add(p, v3_scale(normal, 2.0f * threshold));
+#if FEATURE_COUNT
+        count_march_purpose(COUNT_REFLECTIONS, params);
+#endif
         march_result b = march(start, dir, active, pixel_angle, 0.0f, params);
         normal = hit_normal(start, dir, b, pixel_angle, params);
         p = v3_add(start, v3_scale(dir, b.t));
         threshold = hit_threshold(b.t, pixel_angle);
         vec3 seen = v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);
+#if FEATURE_COUNT
+        count_scope(b.hit, params);
+#endif
         if (ANY(b.hit))
             seen = v3_select(seen, shade(p, normal, dir, threshold, b.steps, b.hit, params), b.hit);
 #if FEATURE_FOG
@@ -279,6 +291,9 @@ vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 
     real t = 0.0f, t_inside = 0.0f;
     mask marching = active;
     for (int i = 0; i < MAX_STEPS && ANY(marching); i++) {
+#if FEATURE_COUNT
+        count_evaluations(COUNT_REFRACTION, marching, 1.0f, params);
+#endif
         real d = distance_estimate(v3_add(p, v3_scale(inside_dir, t)), params);
         marching = marching & (d < threshold);
         t_inside = SELECT(t_inside, t, marching);
@@ -288,11 +303,18 @@ vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 
     // the far side lies between the last point inside and the first one out
     for (int i = 0; i < 8; i++) {
         real middle = 0.5f * (t_inside + t);
+#if FEATURE_COUNT
+        count_evaluations(COUNT_REFRACTION, active, 1.0f, params);
+#endif
         mask within = distance_estimate(v3_add(p, v3_scale(inside_dir, middle)), params) < threshold;
         t_inside = SELECT(t_inside, middle, within);
         t = SELECT(middle, t, within);
     }
     vec3 exit = v3_add(p, v3_scale(inside_dir, t));
+#if FEATURE_COUNT
+    count_scope(active, params);
+    count_march_purpose(COUNT_REFRACTION, params);
+#endif
     vec3 exit_normal = estimate_normal(exit, threshold, params);
     vec3 out_dir = refracted(inside_dir, v3_scale(exit_normal, -1.0f), s.ior);
     vec3 out_start = v3_add(exit, v3_scale(exit_normal, 2.0f * threshold));
@@ -300,6 +322,9 @@ vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 
     vec3 beyond_normal = hit_normal(out_start, out_dir, beyond, pixel_angle, params);
     vec3 far = v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);
     if (ANY(beyond.hit)) {
+#if FEATURE_COUNT
+        count_scope(beyond.hit, params);
+#endif
         vec3 q = v3_add(out_start, v3_scale(out_dir, beyond.t));
         far = v3_select(far, shade(q, beyond_normal, out_dir, hit_threshold(beyond.t, pixel_angle),
                                    beyond.steps, beyond.hit, params), beyond.hit);
@@ -330,6 +355,9 @@ vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixe
     if (ANY(m.hit)) {
         vec3 p = v3_add(origin, v3_scale(dir, m.t));
         real threshold = hit_threshold(m.t, pixel_angle);
+#if FEATURE_COUNT
+        count_scope(m.hit, params);
+#endif
         color = v3_select(color, shade(p, normal, dir, threshold, m.steps, m.hit, params), m.hit);
     }
 #if FEATURE_TRANSPARENCY
@@ -380,6 +408,9 @@ __kernel void render(__global float *out, __constant scalar *params,
 
     // The pinhole ray through the pixel centre gives the AOVs.
     vec3 dir = pixel_ray(camera, width, height, px + 0.5f, py + 0.5f);
+#if FEATURE_COUNT
+    count_march_purpose(COUNT_CAMERA, params);
+#endif
     march_result centre = march(origin, dir, inside, pixel_angle, jitter, params);
     vec3 normal = hit_normal(origin, dir, centre, pixel_angle, params);
 
@@ -409,6 +440,9 @@ __kernel void render(__global float *out, __constant scalar *params,
 #if FEATURE_DEPTH_OF_FIELD
             lens_sample(camera, unit_random(key ^ 0x85ebca6bu), unit_random(key ^ 0xc2b2ae35u),
                         &sample_origin, &sample_dir);
+#endif
+#if FEATURE_COUNT
+            count_march_purpose(COUNT_CAMERA, params);
 #endif
             march_result m = march(sample_origin, sample_dir, inside, pixel_angle, jitter, params);
             vec3 sample_normal = hit_normal(sample_origin, sample_dir, m, pixel_angle, params);
@@ -444,6 +478,9 @@ __kernel void render(__global float *out, __constant scalar *params,
     passes.specular = v3((real)0.0f, 0.0f, 0.0f);
     passes.shadow = 0.0f;
     passes.occlusion = 0.0f;
+#if FEATURE_COUNT
+    count_scope(centre.hit, params);
+#endif
     if (ANY(centre.hit))
         shade_passes(v3_add(origin, v3_scale(dir, centre.t)), normal, dir, hit_threshold(centre.t, pixel_angle),
                      centre.steps, centre.hit, params, &passes);

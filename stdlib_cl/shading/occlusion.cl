@@ -7,6 +7,9 @@ real ambient_occlusion(vec3 p, vec3 normal, real delta, real strength, __constan
     real weight = 0.5f;
     for (int i = 1; i <= 5; i++) {
         real along = delta * (real)i;
+#if FEATURE_COUNT
+        count_evaluations(COUNT_AO, scoped(params), 1.0f, params);
+#endif
         real d = distance_estimate(v3_add(p, v3_scale(normal, along)), params);
         occlusion += weight * max(along - d, 0.0f) / delta;
         weight *= 0.5f;

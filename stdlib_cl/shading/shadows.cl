@@ -8,6 +8,9 @@ real hard_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, mask ac
     real t = 2.0f * threshold;
     real visible = 1.0f;
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
+#if FEATURE_COUNT
+        count_evaluations(COUNT_SHADOWS, active, 1.0f, params);
+#endif
         real d = distance_estimate(v3_add(origin, v3_scale(to_light, t)), params);
         mask blocked = active & (d < threshold);
         visible = SELECT(visible, (real)0.0f, blocked);
@@ -34,6 +37,9 @@ real hard_shadow_through(vec3 origin, vec3 to_light, real max_t, real threshold,
     mask clear_of_surface = MASK_TRUE;
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
         vec3 q = v3_add(origin, v3_scale(to_light, t));
+#if FEATURE_COUNT
+        count_evaluations(COUNT_SHADOWS, active, 1.0f, params);
+#endif
         real d = distance_estimate(q, params);
         mask entering = active & clear_of_surface & (d < threshold);
         if (ANY(entering)) {
@@ -57,6 +63,9 @@ real lowest_ratio(vec3 origin, vec3 to_light, real a, real b, real c, real ratio
                   __constant scalar *params) {
     for (int i = 0; i < 4; i++) {
         real left = 0.5f * (a + b), right = 0.5f * (b + c);
+#if FEATURE_COUNT
+        count_evaluations(COUNT_SHADOWS, scoped(params), 2.0f, params);
+#endif
         real at_left = distance_estimate(v3_add(origin, v3_scale(to_light, left)), params) / left;
         real at_right = distance_estimate(v3_add(origin, v3_scale(to_light, right)), params) / right;
         mask to_left = at_left < ratio;
@@ -87,11 +96,17 @@ real soft_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, real k,
     real t_before = t, t_last = t;
     real ratio_before = (real)1e30f, ratio_last = (real)1e30f;
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
+#if FEATURE_COUNT
+        count_evaluations(COUNT_SHADOWS, active, 1.0f, params);
+#endif
         real d = distance_estimate(v3_add(origin, v3_scale(to_light, t)), params);
         real ratio = d / t;
         visible = SELECT(visible, min(visible, k * ratio), active);
         mask dip = active & (ratio_last <= ratio_before) & (ratio_last <= ratio) & (k * ratio_last < 2.0f);
         if (ANY(dip)) {
+#if FEATURE_COUNT
+            count_scope(dip, params);
+#endif
             real lowest = lowest_ratio(origin, to_light, t_before, t_last, t, ratio_last, params);
             visible = SELECT(visible, min(visible, k * lowest), dip);
         }

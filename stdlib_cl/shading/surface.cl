@@ -3,6 +3,9 @@
 // hit threshold, so that detail below the pixel footprint is not amplified:
 // tetrahedral (4 evaluations, Quilez "normals for an SDF") or central (6).
 vec3 tetrahedral_normal(vec3 p, real h, __constant scalar *params) {
+#if FEATURE_COUNT
+    count_evaluations(COUNT_NORMALS, scoped(params), 4.0f, params);
+#endif
     real a = distance_estimate(v3(p.x + h, p.y - h, p.z - h), params);
     real b = distance_estimate(v3(p.x - h, p.y - h, p.z + h), params);
     real c = distance_estimate(v3(p.x - h, p.y + h, p.z - h), params);
@@ -13,6 +16,9 @@ vec3 tetrahedral_normal(vec3 p, real h, __constant scalar *params) {
 }
 
 vec3 central_normal(vec3 p, real h, __constant scalar *params) {
+#if FEATURE_COUNT
+    count_evaluations(COUNT_NORMALS, scoped(params), 6.0f, params);
+#endif
     real dx = distance_estimate(v3(p.x + h, p.y, p.z), params) - distance_estimate(v3(p.x - h, p.y, p.z), params);
     real dy = distance_estimate(v3(p.x, p.y + h, p.z), params) - distance_estimate(v3(p.x, p.y - h, p.z), params);
     real dz = distance_estimate(v3(p.x, p.y, p.z + h), params) - distance_estimate(v3(p.x, p.y, p.z - h), params);

@@ -1,0 +1,148 @@
+"""`fractalc bench --count`: distance evaluations per pixel, by purpose.
+
+The counting build is the scene's kernel with the library's
+`#if FEATURE_COUNT` lines kept (emit.Target.count; normal kernels hold no
+trace of them) and three edits to its text made here: `params` becomes a
+__global buffer, whose values are followed by a work-item's counters
+(stdlib_cl/count.cl, placed before the scene's functions), and each formula
+loop of the distance estimate counts its iterations for the rays being
+evaluated. A ray counts where it is marched (its lane of the mask), not
+where a vector evaluates it along with rays that are done, so the counts are
+those of one ray per work-item, the same on every machine, and the same
+from run to run (no atomics: each work-item owns its counters).
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, replace
+
+from . import run
+from .build import build
+from .emit import double_literals, emit
+from .lower import lower
+from .passes import channels
+from .resources import resource_dir
+
+# the kernel's purposes, in the order of stdlib_cl/count.cl's COUNT_ constants
+PURPOSES = ("camera", "normals", "shadows", "ao", "reflections", "refraction", "other")
+# a work-item's counters per ray: three bookkeeping slots, then one per purpose, then iterations
+BOOKKEEPING_SLOTS = 3
+COUNT_SLOTS = BOOKKEEPING_SLOTS + len(PURPOSES) + 1
+
+_SCENE_MARK = "// ---- the scene"
+_PARAMS = "__constant scalar *params"
+_LOOP_EXIT = re.compile(r"^(\s*)if \(!ANY\((\w+)\)\) break;$")
+_FIXED_LOOP = re.compile(r"^(\s*)for \(int \w+ = 0; .*\) \{$")
+_RAY_BRANCH = re.compile(r"^(\s*)if \(ANY\((\w+)\)\) \{$")
+
+
+@dataclass(frozen=True)
+class Counts:
+    scene: str
+    width: int
+    height: int
+    lanes: int
+    precision: str
+    evaluations: dict          # purpose -> distance evaluations, all pixels together
+    iterations: int            # formula iterations in those evaluations
+
+    @property
+    def pixels(self) -> int:
+        return self.width * self.height
+
+    @property
+    def total(self) -> int:
+        return sum(self.evaluations.values())
+
+    def per_pixel(self) -> dict:
+        return {purpose: n / self.pixels for purpose, n in self.evaluations.items()}
+
+    def as_dict(self) -> dict:
+        return {"scene": self.scene, "width": self.width, "height": self.height, "lanes": self.lanes,
+                "precision": self.precision, "evaluations": dict(self.evaluations),
+                "evaluations_per_pixel": self.total / self.pixels,
+                "by_purpose_per_pixel": self.per_pixel(),
+                "iterations_per_evaluation": self.iterations / max(self.total, 1)}
+
+
+def counting_source(source: str, param_count: int, double: bool) -> str:
+    """The counting build's text of a kernel emitted with Target(count=True)."""
+    helpers = (resource_dir("stdlib_cl") / "count.cl").read_text()
+    helpers = f"#define COUNT_BASE {max(param_count, 1)}\n" + (double_literals(helpers) if double else helpers)
+    head, mark, scene = source.partition(_SCENE_MARK)
+    return (head + helpers + "\n" + mark + _counted_iterations(scene)).replace(_PARAMS, "__global scalar *params")
+
+
+def _counted_iterations(scene: str) -> str:
+    """The scene's text with each loop of `distance_estimate` counting its
+    iterations: those of the rays still iterating (past the loop's exit test)
+    inside every per-ray branch around it."""
+    lines, out = scene.split("\n"), []
+    inside, branches = False, []    # branches: (indent, mask) of the open per-ray branches
+    for i, line in enumerate(lines):
+        out.append(line)
+        if line.startswith("real distance_estimate("):
+            inside = True
+        elif inside and line == "}":
+            return "\n".join(out + lines[i + 1:])
+        if not inside:
+            continue
+        indent = len(line) - len(line.lstrip())
+        while branches and line.strip() == "}" and indent == branches[-1][0]:
+            branches.pop()
+        branch = _RAY_BRANCH.match(line)
+        if branch:
+            branches.append((len(branch.group(1)), branch.group(2)))
+        rays = " & ".join(["MASK_TRUE"] + [m for _, m in branches])
+        exit_test = _LOOP_EXIT.match(line)
+        if exit_test:
+            out.append(f"{exit_test.group(1)}count_iterations({exit_test.group(2)} & {rays}, params);")
+        fixed = _FIXED_LOOP.match(line)
+        if fixed and not _declares_exit_first(lines, i):
+            out.append(f"{fixed.group(1)}    count_iterations({rays}, params);")
+    return "\n".join(out)
+
+
+def _declares_exit_first(lines: list[str], i: int) -> bool:
+    """Whether the loop opening at line i has an exit test (before its
+    first nested block): its iterations are counted there."""
+    for line in lines[i + 1:]:
+        if _LOOP_EXIT.match(line):
+            return True
+        if line.rstrip().endswith("{") or line.strip() == "}":
+            return False
+    return False
+
+
+def count(scene, width: int | None = None, height: int | None = None, camera=None) -> Counts:
+    """Distance evaluations of one render of `scene` (its file's view and
+    settings unless given), by purpose, and the formula iterations in them."""
+    settings = scene.checked.render
+    width, height = width or settings.width, height or settings.height
+    camera = camera or scene.checked.camera
+    target = replace(scene._target(settings), count=True)
+    emitted = emit(lower(replace(scene.checked, render=settings, camera=camera)), target)
+    params = scene._param_values()
+    source = counting_source(emitted, len(params), target.double)
+    program = build(source, scene.device)
+    frame = run.Frame(width, height, settings.samples, 0, run.camera_block(camera))
+    counters = run.counted_render(program, scene.device, frame, params, target.lanes, target.double,
+                                  COUNT_SLOTS, len(channels(settings.aovs)))
+    totals = counters.sum(axis=0)
+    evaluations = {p: int(round(totals[BOOKKEEPING_SLOTS + i])) for i, p in enumerate(PURPOSES)}
+    return Counts(scene.checked.file, width, height, target.lanes, settings.precision, evaluations,
+                  int(round(totals[-1])))
+
+
+def table(counts: Counts) -> str:
+    """The counts as a report: per pixel by purpose, with the totals."""
+    from .bench import aligned
+    c = counts
+    per_pixel = c.per_pixel()
+    rows = [("scene", c.scene), ("resolution", f"{c.width}x{c.height}"),
+            ("kernel", f"{c.precision}, {c.lanes} ray{'s' if c.lanes > 1 else ''} per work-item"),
+            ("evaluations/pixel", f"{c.total / c.pixels:.2f} ({c.total:,} in all)")]
+    rows += [(f"  {p}", f"{per_pixel[p]:.2f} ({c.evaluations[p]:,})") for p in PURPOSES]
+    rows.append(("iterations/eval", f"{c.iterations / max(c.total, 1):.2f}"))
+    return aligned(rows)
+

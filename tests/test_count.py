@@ -1,0 +1,137 @@
+"""fractalc bench --count: the counting build counts each distance
+evaluation once, for its purpose, and normal kernels hold none of it."""
+import json
+import math
+import re
+import subprocess
+import sys
+
+import pytest
+
+import fractalc
+from fractalc.count import PURPOSES, count, counting_source
+
+# one pixel whose ray runs along z, `offset` to the side of the sphere's
+# centre; glow keeps the scene's bound out of the march (it starts at t = 0),
+# and without dither its first step is whole
+SPHERE = """
+scene sphere(1).translate(({offset}, 0, 0))
+camera {{ position: (0, 0, -{distance}), target: (0, 0, 0), up: (0, 1, 0) }}
+light directional {{ direction: (0, 0, 1), shadows: none }}
+render {{ width: 1, height: 1, epsilon: {epsilon}, max_steps: 64, dither: 0, glow: {{ strength: 0.5, radius: 0.1 }} }}
+"""
+
+# every purpose but refraction's and glow's: shadows of both kinds, AO, mirrors
+LIT = """
+material mirror { color: (0.9, 0.9, 0.9), reflectivity: 0.5 }
+scene sphere(0.8).translate((0, 0, 0.8)).material(mirror) | box(0.4).translate((1.2, 0.3, 0.4)) | plane(offset: 0)
+camera { position: (0.5, -4, 2), target: (0, 0, 0.5) }
+light directional { direction: (-0.5, 0.4, -1), shadows: hard }
+light point { position: (2, -2, 3), intensity: 6, shadows: soft }
+render { width: 16, height: 12, ao: 0.7, reflections: 1 }
+"""
+
+BULB = """
+scene mandelbulb(power: 8, iterations: 12, bailout: 2)
+camera { position: (0, -3.2, 1.0), target: (0, 0, 0) }
+render { width: 16, height: 12 }
+"""
+
+
+def sphere_tracing_steps(offset: float, distance: float, epsilon: float) -> int:
+    """Hart's sphere tracing of that ray, in double: evaluations until the
+    distance falls below epsilon."""
+    t = 0.0
+    for steps in range(1, 65):
+        d = math.hypot(offset, distance - t) - 1.0
+        # far enough from the threshold that float's rounding agrees
+        assert abs(d - epsilon) > 1e-4 * epsilon
+        if d < epsilon:
+            return steps
+        t += d
+    raise AssertionError("the ray misses")
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.6, 0.9])
+def test_a_spheres_camera_ray_takes_the_evaluations_sphere_tracing_predicts(offset):
+    distance, epsilon = 4.0, 1e-3
+    counts = count(fractalc.loads(SPHERE.format(offset=offset, distance=distance, epsilon=epsilon)))
+    predicted = sphere_tracing_steps(offset, distance, epsilon)
+    assert predicted >= (2 if offset == 0 else 4)
+    assert counts.evaluations["camera"] == predicted
+    # the hit's tetrahedral normal: four more; nothing else is evaluated
+    assert counts.evaluations["normals"] == 4
+    assert counts.total == predicted + 4 and counts.iterations == 0
+
+
+def test_counts_are_the_same_from_run_to_run_and_agree_with_the_steps_channel():
+    scene = fractalc.loads(LIT)
+    first, second = count(scene), count(scene)
+    assert first == second
+    per_pixel = first.per_pixel()
+    for purpose in ("camera", "normals", "shadows", "ao", "reflections"):
+        assert per_pixel[purpose] > 0, purpose
+    assert first.evaluations["refraction"] == first.evaluations["other"] == 0
+    image = scene.render()
+    assert first.evaluations["camera"] == image.steps.sum()
+    hits = int((image.depth < math.inf).sum())
+    # a tetrahedral normal per hit (four evaluations), and more for the mirror's hits
+    assert first.evaluations["normals"] > 4 * hits
+    assert first.evaluations["ao"] >= 5 * hits
+
+
+def test_counts_are_of_rays_not_of_the_lanes_a_work_item_evaluates():
+    one, many = (count(fractalc.loads(LIT, lanes=lanes)) for lanes in (1, 8))
+    assert one.lanes == 1 and many.lanes == 8
+    assert one.evaluations == many.evaluations
+
+
+def test_formula_iterations_are_counted_for_the_rays_evaluated():
+    counts = count(fractalc.loads(BULB))
+    per_evaluation = counts.iterations / counts.total
+    # most evaluations are far from the bulb, where it escapes in a few
+    # iterations or is not iterated at all (outside its bounding sphere)
+    assert 0.5 < per_evaluation < 12
+
+
+def test_normal_kernels_hold_no_counting_code():
+    for text in (LIT, BULB):
+        scene = fractalc.loads(text)
+        for lanes in (1, 8):
+            source = scene.kernel_source(lanes=lanes)
+            assert not re.search(r"\bcount_\w+\(|COUNT_|\bscoped\(|march_purpose", source)
+            assert "__constant scalar *params" in source
+
+
+def test_every_evaluation_in_the_counting_build_is_counted():
+    scene = fractalc.loads(LIT.replace("reflectivity: 0.5", "reflectivity: 0.5, transparency: 0.5"))
+    from dataclasses import replace
+    from fractalc.emit import emit
+    from fractalc.lower import lower
+    target = replace(scene._target(scene.checked.render), count=True)
+    source = counting_source(emit(lower(scene.checked), target), 0, False)
+    code = "\n".join(line for line in source.splitlines() if not line.lstrip().startswith("//"))
+    functions = re.split(r"\n(?=\S)", code)
+    evaluating = [f for f in functions if "distance_estimate(" in f.split("{", 1)[-1]
+                  and not f.startswith(("real distance_estimate(", "__kernel void distance_at_points("))]
+    assert len(evaluating) >= 6       # march, normals, AO, both shadows, refraction
+    for function in evaluating:
+        assert "count_evaluations(" in function, function.split("\n", 1)[0]
+
+
+def test_bench_count_prints_and_writes_the_counts(tmp_path):
+    scene_file = tmp_path / "scene.frac"
+    scene_file.write_text(LIT)
+    out = tmp_path / "counts.json"
+    result = subprocess.run([sys.executable, "-m", "fractalc", "bench", "--count", str(scene_file),
+                             "--width", "8", "--height", "6", "--json", str(out)],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    figures = json.loads(out.read_text())
+    assert (figures["width"], figures["height"]) == (8, 6)
+    assert set(figures["by_purpose_per_pixel"]) == set(PURPOSES)
+    assert math.isclose(figures["evaluations_per_pixel"], sum(figures["by_purpose_per_pixel"].values()))
+    assert f"{figures['evaluations_per_pixel']:.2f}" in result.stdout
+    refused = subprocess.run([sys.executable, "-m", "fractalc", "bench", "--count", "--sweep", str(scene_file)],
+                             capture_output=True, text=True, timeout=60)
+    assert refused.returncode == 2 and "--count" in refused.stderr
