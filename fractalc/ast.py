@@ -42,7 +42,7 @@ class Unary:
 
 @node
 class Binary:
-    op: str            # + - * / | &
+    op: str            # + - * / | & and, in formulas, < <= > >= == !=
     left: "Expr"
     right: "Expr"
     span: Span
@@ -73,7 +73,16 @@ class Method:
     span: Span
 
 
-Expr = Union[Number, Name, Vector, Unary, Binary, Call, Method]
+@node
+class Field:
+    """`receiver.x`: components of a vector (x, y, z, w, or several: xyz)."""
+    receiver: "Expr"
+    name: str
+    name_span: Span
+    span: Span
+
+
+Expr = Union[Number, Name, Vector, Unary, Binary, Call, Method, Field]
 
 
 # ---- blocks and declarations -----------------------------------------------
@@ -158,7 +167,42 @@ class PathDecl:
     span: Span
 
 
-Decl = Union[ParamDecl, LetDecl, MaterialDecl, SceneDecl, CameraDecl, LightDecl, RenderDecl, PathDecl]
+# ---- formulas ----------------------------------------------------------------
+
+@node
+class Assign:
+    """`name = value` in a formula: `phase` says when it runs: "init" once
+    before the iterations, "step" in each, "final" once after them."""
+    name: str
+    name_span: Span
+    value: Expr
+    phase: str
+    span: Span
+
+
+@node
+class If:
+    """`if condition { ... } else { ... }` among a formula's steps."""
+    condition: Expr
+    then: tuple["Statement", ...]
+    otherwise: tuple["Statement", ...]
+    span: Span
+
+
+Statement = Union[Assign, If]
+
+
+@node
+class FormulaDecl:
+    name: str
+    name_span: Span
+    params: tuple[ParamDecl, ...]
+    body: tuple[Statement, ...]
+    span: Span
+
+
+Decl = Union[ParamDecl, LetDecl, MaterialDecl, SceneDecl, CameraDecl, LightDecl, RenderDecl, PathDecl,
+             FormulaDecl]
 
 
 @node

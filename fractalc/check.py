@@ -12,15 +12,15 @@ import itertools
 import math
 from dataclasses import dataclass, replace
 
-from . import ast, ir
+from . import ast, formula_code, ir
 from .errors import Diagnostic, SceneError, Span, diagnostic
-from .program import (DEFAULT_MATERIAL, Camera, CameraPath, CheckedScene, Coloring, Combination, Fog, Glow,
+from .program import (DEFAULT_MATERIAL, Camera, CameraPath, CheckedScene, Coloring, Combination, Fog, Fractal, Glow,
                       Keyframe, Light, Material, ParamCheck, ParamInfo, Primitive, RenderSettings, Shape, Slice,
                       Transformed, WithMaterial)
 from .stdlib import COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
 
 # The language's value types.
-NUM, SHAPE, MATERIAL, WORD, COLORING = "number", "shape", "material", "word", "coloring"
+NUM, SHAPE, MATERIAL, WORD, COLORING, FORMULA = "number", "shape", "material", "word", "coloring", "formula"
 def vec_type(n: int) -> str:
     return f"vec{n}"
 
@@ -51,7 +51,7 @@ FLOAT_MAX = 3.4028234663852886e38
 def in_float_range(x: float) -> bool:
     return math.isfinite(x) and abs(x) <= FLOAT_MAX
 
-_TYPE_WORDS = {NUM: "a number", SHAPE: "a shape", MATERIAL: "a material", WORD: "a name",
+_TYPE_WORDS = {NUM: "a number", SHAPE: "a shape", MATERIAL: "a material", WORD: "a name", FORMULA: "a formula",
                COLORING: "a colouring (orbit_trap)", "color": "a colour (r, g, b) or orbit_trap(...)",
                "vec2": "a 2-vector", "vec3": "a 3-vector", "vec4": "a 4-vector",
                "size": "a number or a 3-vector", "int": "a whole number", "rgb": "a colour (r, g, b)"}
@@ -74,6 +74,7 @@ class _Checker:
         self.colors: dict[tuple, str] = {}
         self.param_checks: list[ParamCheck] = []
         self.shape_sizes: dict[int, tuple[Shape, int]] = {}
+        self.formulas: dict[str, tuple[formula_code.Formula, Signature] | None] = {}
 
     # ---- diagnostics -------------------------------------------------------
 
@@ -91,7 +92,7 @@ class _Checker:
         names: dict[str, Span] = {}
         singles: dict[type, ast.Decl] = {}
         for decl in decls:
-            if isinstance(decl, (ast.ParamDecl, ast.LetDecl, ast.MaterialDecl)):
+            if isinstance(decl, (ast.ParamDecl, ast.LetDecl, ast.MaterialDecl, ast.FormulaDecl)):
                 if decl.name in names:
                     first = names[decl.name]
                     self.error(decl.name_span, f"'{decl.name}' is already declared (line {first.line})")
@@ -112,6 +113,9 @@ class _Checker:
         for decl in decls:
             if isinstance(decl, ast.ParamDecl) and decl.name not in self.params:
                 self.declare_param(decl)
+        for decl in decls:
+            if isinstance(decl, ast.FormulaDecl) and decl.name not in self.formulas:
+                self.declare_formula(decl)
         self.materials[DEFAULT_MATERIAL] = Material(
             DEFAULT_MATERIAL, ir.vec(*(ir.const(0.8) for _ in range(3))),
             ir.const(0.3), ir.const(32.0), ir.const(0.0), ir.const(0.0), ir.const(1.5))
@@ -155,6 +159,120 @@ class _Checker:
                     self.error(decl.default.span,
                                f"'{decl.name}' = {default:g} is outside its range [{low:g}, {high:g}]")
         self.params[decl.name] = ParamInfo(decl.name, len(self.params), default or 0.0, low, high, decl.span)
+
+    # ---- formulas ------------------------------------------------------------
+
+    def declare_formula(self, decl: ast.FormulaDecl) -> None:
+        """A formula's parameters (constant defaults, ranges) and its
+        statements, run once with the defaults: each mistake at its place."""
+        self.formulas[decl.name] = None
+        if decl.name in self.library.signatures or decl.name in FORMULA_FORMS or decl.name in MATH \
+                or decl.name in COMBINATORS or decl.name in COLORINGS:
+            self.error(decl.name_span, f"'{decl.name}' is a built-in name: give the formula another")
+            return
+        parameters, defaults, seen = [], [], set()
+        for param in decl.params:
+            if param.name in seen or param.name in ("z", "distance"):
+                self.error(param.name_span, f"'{param.name}' is already a parameter of '{decl.name}'"
+                           if param.name in seen else
+                           f"'{param.name}' is the formula's own: name the parameter otherwise")
+                return
+            seen.add(param.name)
+            value = self.evaluate(param.default)
+            items = value.data.items if isinstance(value.data, ir.Vec) else (value.data,)
+            if value.type not in (NUM, "vec3", "vec4") or not all(ir.is_const(x) for x in items):
+                if value.type != "error":
+                    self.error(param.default.span, "a formula parameter's default must be a constant number "
+                                                   "or a 3- or 4-vector")
+                return
+            constraints = ()
+            if param.bounds:
+                low = self.constant_number(param.bounds[0], "a parameter's bound")
+                high = self.constant_number(param.bounds[1], "a parameter's bound")
+                if low is None or high is None:
+                    return
+                if low > high:
+                    self.error(param.bounds[0].span, f"the range [{low:g}, {high:g}] is empty")
+                    return
+                if value.type != NUM:
+                    self.error(param.bounds[0].span, "a range is for a number parameter")
+                    return
+                if not low <= items[0].value <= high:
+                    self.error(param.default.span, f"'{param.name}' = {items[0].value:g} is outside its range "
+                                                   f"[{low:g}, {high:g}]")
+                    return
+                constraints = (f"{low!r}..{high!r}",)
+            default = items[0].value if value.type == NUM else tuple(x.value for x in items)
+            parameters.append(Parameter(param.name, "num" if value.type == NUM else value.type, default,
+                                        constraints))
+            defaults.append(value.data)
+        try:
+            formula = formula_code.split(decl, self.program.file, self.program.source)
+            formula_code.orbit((formula_code.Use(formula, tuple(defaults)),), _PROBE_POINT, ir.const(2.0))
+        except formula_code.Mistake as mistake:
+            self.error(mistake.span, mistake.message)
+            return
+        self.formulas[decl.name] = (formula, Signature("formula", decl.name, tuple(parameters)))
+
+    def formula_use(self, e: ast.Call) -> Value:
+        known = self.formulas[e.name]
+        if known is None:
+            raise _Failed              # its declaration had a mistake, already reported
+        formula, signature = known
+        return Value(FORMULA, (formula_code.Use(formula, self.bound_args(e, signature, e.args)),))
+
+    def hybrid(self, e: ast.Call) -> Value:
+        sequence = []
+        for arg in e.args:
+            if arg.name is not None:
+                self.fail(arg.span, "'hybrid' takes formulas in order, without names")
+            value = self.value_of(arg.value)
+            if value.type == "error":
+                raise _Failed
+            if value.type != FORMULA:
+                self.fail(arg.span, f"'hybrid' takes formulas (e.g. hybrid(bulb(8) * 2, amazing_box())), "
+                                    f"this is {_TYPE_WORDS[value.type]}")
+            sequence.extend(value.data)
+        if not sequence:
+            self.fail(e.span, "'hybrid' needs at least one formula")
+        return Value(FORMULA, tuple(sequence))
+
+    def repeated(self, e: ast.Binary, formula: Value, count: Value) -> Value:
+        """`formula * n`: n steps of it in turn in a hybrid."""
+        if e.op != "*" or count.type != NUM:
+            self.fail(e.span, f"a formula can only be repeated: 'formula * count', not '{e.op}' "
+                              f"with {_TYPE_WORDS[count.type]}")
+        n = count.data.value if ir.is_const(count.data) else None
+        if n is None or n != math.floor(n) or not 1 <= n <= 100:
+            self.fail(e.right.span, "a formula's repeat count must be a constant whole number from 1 to 100")
+        return Value(FORMULA, tuple(replace(use, count=use.count * int(n)) for use in formula.data))
+
+    def fractal(self, e: ast.Call) -> Value:
+        bound = self.bind(e, FORMULA_FORMS["fractal"], e.args)
+        formula = bound["formula"][1]
+        if formula.type == "error":
+            raise _Failed
+        if formula.type != FORMULA:
+            if formula.type == WORD:
+                self.unknown_name(bound["formula"][0].value.span, formula.data)
+            self.fail(bound["formula"][0].value.span, f"'fractal' needs a formula (declared with 'formula "
+                                                      f"name(...) {{ ... }}'), this is {_TYPE_WORDS[formula.type]}")
+        values = {}
+        for p in FORMULA_FORMS["fractal"].parameters[1:]:
+            if p.name not in bound:
+                values[p.name] = _default(p) if p.name == "iterations" else None
+                continue
+            arg, value = bound[p.name]
+            if p.name == "julia" and value.type == "vec4":
+                p = replace(p, type="vec4")
+            values[p.name] = self.convert(arg.value.span, value, p, "fractal")
+        try:
+            formula_code.orbit(formula.data, _PROBE_POINT, ir.const(2.0), values["bailout"], values["julia"],
+                               where=e.span)
+        except formula_code.Mistake as mistake:
+            self.fail(mistake.span, mistake.message)
+        return self.shape(Fractal(formula.data, values["iterations"], values["bailout"], values["julia"],
+                                  values["bound"], e.span))
 
     def constant_number(self, expr: ast.Expr, what: str) -> float | None:
         value = self.evaluate(expr)
@@ -262,6 +380,8 @@ class _Checker:
             return self.call(e)
         if isinstance(e, ast.Method):
             return self.method(e)
+        if isinstance(e, ast.Field):
+            return self.field(e)
         raise TypeError(f"unexpected AST node {e!r}")
 
     def name(self, e: ast.Name) -> Value:
@@ -273,7 +393,7 @@ class _Checker:
         if e.name in self.material_decls:
             return Value(MATERIAL, e.name)
         if e.name in self.library.signatures or e.name in COMBINATORS or e.name in MATH \
-                or e.name in COLORINGS:
+                or e.name in COLORINGS or e.name in self.formulas or e.name in FORMULA_FORMS:
             self.fail(e.span, f"'{e.name}' is a function: call it, e.g. '{e.name}()'")
         return Value(WORD, e.name)
 
@@ -302,6 +422,12 @@ class _Checker:
         left, right = self.value_of(e.left), self.value_of(e.right)
         if "error" in (left.type, right.type):
             return _ERROR
+        if left.type == FORMULA:
+            return self.repeated(e, left, right)
+        if right.type == FORMULA:
+            self.fail(e.span, "a formula's repeat count goes after it: 'formula * count'")
+        if e.op not in "+-*/|&":
+            self.fail(e.span, f"'{e.op}' compares numbers in a formula; a scene has no comparisons")
         if left.type == SHAPE and right.type == SHAPE:
             if e.op == "*" or e.op == "/" or e.op == "+":
                 self.fail(e.span, f"'{e.op}' does not combine shapes: use '|' (union), '&' (intersect) or '-' (subtract)")
@@ -455,6 +581,12 @@ class _Checker:
 
     def call(self, e: ast.Call) -> Value:
         name = e.name
+        if name in self.formulas:
+            return self.formula_use(e)
+        if name == "fractal":
+            return self.fractal(e)
+        if name == "hybrid":
+            return self.hybrid(e)
         if name in MATH:
             return self.math(e)
         if name in COMBINATORS:
@@ -464,7 +596,7 @@ class _Checker:
             return Value(COLORING, Coloring(near, far, trap, scale))
         signature = self.library.signatures.get(name)
         if signature is None:
-            hint = self.did_you_mean(name, self.library.signatures, COMBINATORS, MATH, COLORINGS)
+            hint = self.did_you_mean(name, self.library.signatures, COMBINATORS, MATH, COLORINGS, self.formulas)
             self.fail(e.name_span, f"unknown function '{name}'{hint}")
         return self.shape(Primitive(signature, self.bound_args(e, signature, e.args), e.span))
 
@@ -509,6 +641,20 @@ class _Checker:
         except (ValueError, ZeroDivisionError):
             self.fail(e.span, f"'{e.name}' is undefined here (a zero vector?)")
 
+    def field(self, e: ast.Field) -> Value:
+        """`v.x`, `v.xy`: components of a vector."""
+        receiver = self.value_of(e.receiver)
+        if receiver.type == "error":
+            raise _Failed
+        if receiver.type not in ("vec2", "vec3", "vec4"):
+            self.fail(e.span, f"'.{e.name}' takes components of a vector, this is {_TYPE_WORDS[receiver.type]}")
+        names = "xyzw"[:len(receiver.data)]
+        if len(e.name) > 4 or any(ch not in names for ch in e.name):
+            self.fail(e.name_span, f"'.{e.name}' is not a component of {_TYPE_WORDS[receiver.type]} "
+                                   f"(components: {', '.join(names)})")
+        items = tuple(receiver.data.items[names.index(ch)] for ch in e.name)
+        return Value(NUM, items[0]) if len(items) == 1 else Value(vec_type(len(items)), ir.Vec(items))
+
     def method(self, e: ast.Method) -> Value:
         receiver = self.value_of(e.receiver)
         if receiver.type == "error":
@@ -535,7 +681,7 @@ class _Checker:
         in each of a chain of lets doubles it each time. Too many parts is
         an error at the part that passes the limit."""
         parts = shape.shapes if isinstance(shape, Combination) else \
-            () if isinstance(shape, Primitive) else (shape.shape,)
+            () if isinstance(shape, (Primitive, Fractal)) else (shape.shape,)
         size = 1
         for part in parts:
             size += self.shape_sizes[id(part)][1]
@@ -780,6 +926,19 @@ RENDER_KEYS = _keys(
     _P("epsilon_scale", "num", None, ">0", f"<={MAX_EPSILON_SCALE:g}"),
     _P("normals", "word:tetrahedral|central"), _P("fast_math", "word:auto|on|off"),
     _P("exposure", "num", None, "-20..20"), _P("tonemap", "word:none|reinhard|aces"))
+
+
+# `fractal(formula, ...)`: the shape of a formula (docs/formulas.md). The
+# bailout, julia and bound are optional (the bailout's default depends on
+# the estimate's kind: formula_code.orbit).
+FORMULA_FORMS = {
+    "fractal": Signature("fractal", "fractal", (
+        _P("formula", "formula"), _P("iterations", "int", 12.0, "1..1000"), _P("bailout", "num", 0.0, ">0"),
+        _P("julia", "vec3", 0.0), _P("bound", "num", 0.0, ">0"))),
+    "hybrid": Signature("fractal", "hybrid", ()),
+}
+# The point formulas are tried at when checked
+_PROBE_POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
 
 
 def check(program: ast.Program) -> CheckedScene:

@@ -292,6 +292,11 @@ def _simplify(name: str, args: tuple) -> Expr | None:
         return Const(0.0)   # the point's coordinates are finite
     if name == "-" and is_const(args[0]) and args[0].value == 0.0:
         return op("neg", args[1])
+    if name in ("and", "or"):
+        # true & x, false | x: x
+        for known, other in ((args[0], args[1]), (args[1], args[0])):
+            if is_const(known) and bool(known.value) == (name == "and"):
+                return other
     if name == "select" and is_const(args[0]):
         return args[1] if args[0].value else args[2]
     if name == "select" and args[1] == args[2]:

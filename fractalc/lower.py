@@ -12,8 +12,9 @@ import math
 from dataclasses import dataclass, fields
 
 from . import ir
-from .program import (DEFAULT_MATERIAL, CheckedScene, Coloring, Combination, Material, Primitive,
+from .program import (DEFAULT_MATERIAL, CheckedScene, Coloring, Combination, Fractal, Material, Primitive,
                       Shape, Transformed, WithMaterial, fold_shape)
+from . import formula_code
 from .fractals import orbit
 from .stdlib import library
 
@@ -71,6 +72,17 @@ class SceneIR:
     distance: ir.Expr            # real, of POINT
     surface: Surface             # of POINT
     bound: Bound | None = None   # where the whole scene can be (uniform)
+
+
+def _trap_colored(surface: Surface, coloring: Coloring, traps) -> Surface:
+    """Orbit-trap colour: mix(near, far, clamp(trap * scale, 0, 1))."""
+    trap = ir.op("min", traps[1], ir.op("min", traps[2], traps[3])) if coloring.trap == "planes" \
+        else traps[("origin", "x", "y", "z").index(coloring.trap)]
+    t = ir.op("clamp", ir.mul(trap, coloring.scale), ir.const(0.0), ir.const(1.0))
+    rgb = tuple(ir.op("mix", a, b, t) for a, b in zip(coloring.near.items, coloring.far.items))
+    items = surface.items()
+    return Surface(*rgb, *items[3:])
+
 
 
 def _smooth_or_plain(plain: str, smooth_function: str, a, b, k: ir.Expr) -> ir.Expr:
@@ -176,7 +188,7 @@ class _Lowerer:
 
     def parts(self, s: Shape, context) -> tuple:
         point, look = context
-        if isinstance(s, Primitive):
+        if isinstance(s, (Primitive, Fractal)):
             return ()
         if isinstance(s, WithMaterial):
             return ((s.shape, (point, (self.surface_of(s.material), s.coloring))),)
@@ -188,6 +200,8 @@ class _Lowerer:
         point, look = context
         if isinstance(s, Primitive):
             return self.primitive(s, point), self.primitive_surface(s, point, look)
+        if isinstance(s, Fractal):
+            return self.fractal(s, point), self.fractal_surface(s, point, look)
         if isinstance(s, WithMaterial):
             return values[0]
         if isinstance(s, Combination):
@@ -208,14 +222,23 @@ class _Lowerer:
         surface, coloring = look
         if coloring is None or s.signature.kind != "fractal":
             return surface
-        # Orbit-trap colour: mix(near, far, clamp(trap * scale, 0, 1)).
-        traps = orbit(s.signature.name, point, s.args, trap=True).trap
-        trap = ir.op("min", traps[1], ir.op("min", traps[2], traps[3])) if coloring.trap == "planes" \
-            else traps[("origin", "x", "y", "z").index(coloring.trap)]
-        t = ir.op("clamp", ir.mul(trap, coloring.scale), ir.const(0.0), ir.const(1.0))
-        rgb = tuple(ir.op("mix", a, b, t) for a, b in zip(coloring.near.items, coloring.far.items))
-        items = surface.items()
-        return Surface(*rgb, *items[3:])
+        return _trap_colored(surface, coloring, orbit(s.signature.name, point, s.args, trap=True).trap)
+
+    @staticmethod
+    def fractal(s: Fractal, point: Point) -> ir.Expr:
+        distance = formula_code.orbit(s.sequence, point, s.iterations, s.bailout, s.julia).distance
+        if s.bound is None:
+            return distance
+        bound = ir.call("sd_sphere", (ir.Vec(point), s.bound))
+        return ir.bounded(bound, distance, ir.mul(s.bound, ir.const(BOUND_MARGIN)))
+
+    @staticmethod
+    def fractal_surface(s: Fractal, point: Point, look) -> Surface:
+        surface, coloring = look
+        if coloring is None:
+            return surface
+        return _trap_colored(surface, coloring, formula_code.orbit(s.sequence, point, s.iterations, s.bailout,
+                                                                   s.julia, trap=True).trap)
 
     @staticmethod
     def combination(s: Combination, lowered: list):
@@ -299,7 +322,7 @@ class _Bounds:
 
     @staticmethod
     def _parts(s: Shape, context) -> tuple:
-        if isinstance(s, Primitive):
+        if isinstance(s, (Primitive, Fractal)):
             return ()
         if isinstance(s, Combination):
             return tuple((part, context) for part in s.shapes)
@@ -308,6 +331,8 @@ class _Bounds:
     def _combine(self, s: Shape, context, bounds: list) -> Bound | None:
         if isinstance(s, Primitive):
             return self._primitive(s)
+        if isinstance(s, Fractal):
+            return None if s.bound is None else Bound(((ir.const(0.0),) * 3, s.bound))
         if isinstance(s, WithMaterial):
             return bounds[0]
         if isinstance(s, Combination):

@@ -37,7 +37,7 @@ _TOKEN_WORDS = {
     "LSQB": "'['", "RSQB": "']'", "LBRACE": "'{'", "RBRACE": "'}'",
     "COMMA": "','", "COLON": "':'", "EQUAL": "'='", "DOT": "'.'",
     "PLUS": "'+'", "MINUS": "'-'", "STAR": "'*'", "SLASH": "'/'",
-    "BAR": "'|'", "AMP": "'&'", "_NL": "a new line", "$END": "the end of the file",
+    "BAR": "'|'", "AMP": "'&'", "COMPARE": "a comparison", "_NL": "a new line", "$END": "the end of the file",
 }
 
 
@@ -91,7 +91,7 @@ def _span(meta_or_token) -> Span:
     return Span(m.line, m.column, m.end_line, m.end_column)
 
 
-_EXPRESSIONS = {"vector", "negate", "binary", "call", "method", "named_arg", "positional_arg"}
+_EXPRESSIONS = {"vector", "negate", "binary", "call", "method", "field", "named_arg", "positional_arg"}
 
 
 class _DepthTree(Tree):
@@ -144,6 +144,9 @@ class _ToAst(Transformer_NonRecursive):
         receiver, name, args = c[0], c[1], c[2] or ()
         return ast.Method(receiver, str(name), _span(name), args, _span(meta))
 
+    def field(self, meta, c):
+        return ast.Field(c[0], str(c[1]), _span(c[1]), _span(meta))
+
     def args(self, meta, c):
         return tuple(c)
 
@@ -191,6 +194,37 @@ class _ToAst(Transformer_NonRecursive):
     def path_decl(self, meta, c):
         keyframes = tuple(x for x in c if isinstance(x, ast.Keyframe))
         return ast.PathDecl(keyframes, _span(meta))
+
+    # formulas
+    def formula_decl(self, meta, c):
+        return ast.FormulaDecl(str(c[0]), _span(c[0]), c[1] or (), c[2], _span(meta))
+
+    def formula_params(self, meta, c):
+        return tuple(c)
+
+    def formula_param(self, meta, c):
+        return ast.ParamDecl(str(c[0]), _span(c[0]), c[1], c[2] if len(c) > 2 else None, _span(meta))
+
+    def statements(self, meta, c):
+        return tuple(x for x in c if isinstance(x, (ast.Assign, ast.If)))
+
+    def _assign(self, meta, c, phase):
+        return ast.Assign(str(c[0]), _span(c[0]), c[1], phase, _span(meta))
+
+    def assign(self, meta, c):
+        return self._assign(meta, c, "step")
+
+    def init_assign(self, meta, c):
+        return self._assign(meta, c, "init")
+
+    def final_assign(self, meta, c):
+        return self._assign(meta, c, "final")
+
+    def if_statement(self, meta, c):
+        otherwise = c[2] if len(c) > 2 and c[2] is not None else ()
+        if isinstance(otherwise, ast.If):
+            otherwise = (otherwise,)
+        return ast.If(c[0], c[1], otherwise, _span(meta))
 
     def start(self, meta, c):
         return tuple(c)

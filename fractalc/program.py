@@ -67,7 +67,19 @@ class WithMaterial:
     coloring: Coloring | None = None   # fractals inside take their colour from it
 
 
-Shape = Union[Primitive, Combination, Transformed, WithMaterial]
+@dataclass(frozen=True)
+class Fractal:
+    """`fractal(formula, ...)`: the fractal of a formula written in the
+    language, or of a hybrid of several (fractalc/formula_code.py)."""
+    sequence: tuple                       # formula_code.Use, in turn
+    iterations: ir.Expr
+    bailout: ir.Expr | None               # None: no bailout
+    julia: ir.Vec | None                  # c: this constant, not the point
+    bound: ir.Expr | None                 # a radius holding the fractal (None: not known)
+    span: Span
+
+
+Shape = Union[Primitive, Combination, Transformed, WithMaterial, Fractal]
 
 
 def fold_shape(root: Shape, context, parts, combine):

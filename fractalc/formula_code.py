@@ -1,0 +1,763 @@
+"""Formulas written in the language (`formula name(...) { ... }`) as IR,
+and the orbit of a fractal built from them (docs/formulas.md).
+
+`check` runs a formula's statements here once where it is declared (every
+mistake is a `Mistake` at its place) and `lower` runs them again for each
+use, with that use's arguments. Each value is a `Value`: its type, its IR
+components and, for the compiler's derivative, its `form`: lengths of
+d value / d point are at most a dr + b, where dr is the running derivative
+of z (the point moves, z moves dr times as far), when the value is a
+similarity of z (a fold, a rotation, a uniform scale, c added; Syntopia,
+"Distance Estimated 3D Fractals", part VI). A formula whose every step
+keeps z's form gets the cheap scalar running derivative; any other is
+differentiated in forward mode (fractalc/derive.py, part VII).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Callable
+
+from . import ast, derive, formulas, ir
+from .errors import Span
+
+ZERO, ONE = ir.const(0.0), ir.const(1.0)
+INDEPENDENT = (ZERO, ZERO)        # a form: a value that does not depend on the point
+# A step whose z is beyond this length (or not finite) is not taken: the ray
+# stops with its last finite state, so every estimate is finite.
+OVERFLOW_LENGTH = 1e18
+MAX_DERIVATIVE = 1e30
+DEFAULT_BAILOUT = 4.0
+ESTIMATES = ("escape_time_estimate", "linear_estimate")
+VECTOR_TYPES = ("vec2", "vec3", "vec4")
+_WORDS = {"num": "a number", "vec2": "a 2-vector", "vec3": "a 3-vector", "vec4": "a 4-vector",
+          "mask": "a comparison"}
+_COMPONENTS = "xyzw"
+
+
+class Mistake(Exception):
+    def __init__(self, span: Span, message: str):
+        super().__init__(message)
+        self.span, self.message = span, message
+
+
+@dataclass(frozen=True)
+class Value:
+    type: str                                   # num | vec2..vec4 | mask
+    items: tuple[ir.Expr, ...]
+    form: tuple[ir.Expr, ir.Expr] | None = INDEPENDENT
+    degree: float = 0.0                         # its growth with z: 1 for z, 2 for z^2, ...
+    underivable: Span | None = None             # an operation on the point without a derivative rule
+
+    @property
+    def independent(self) -> bool:
+        return self.form is not None and all(ir.is_const(x) and x.value == 0.0 for x in self.form)
+
+
+def _word(v: Value) -> str:
+    return _WORDS[v.type]
+
+
+def number(x: ir.Expr) -> Value:
+    return Value("num", (x,))
+
+
+def vector(items, form=INDEPENDENT, degree=0.0) -> Value:
+    return Value(f"vec{len(items)}", tuple(items), form, degree)
+
+
+def _scaled_form(form, s: ir.Expr):
+    return None if form is None else (ir.mul(form[0], s), ir.mul(form[1], s))
+
+
+def _summed_form(f, g):
+    return None if f is None or g is None else (ir.add(f[0], g[0]), ir.add(f[1], g[1]))
+
+
+def _dependent_scalar(degree: float, *operands: Value) -> Value:
+    """The shared fields of a value computed from `operands` by an
+    operation that is not a similarity."""
+    independent = all(o.independent for o in operands)
+    return Value("num", (), INDEPENDENT if independent else None, 0.0 if independent else degree,
+                 next((o.underivable for o in operands if o.underivable), None))
+
+
+# ---- statements --------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Formula:
+    """A checked formula: its parameters' names and statements by phase."""
+    name: str
+    params: tuple[str, ...]
+    init: tuple[ast.Statement, ...]
+    step: tuple[ast.Statement, ...]
+    final: tuple[ast.Statement, ...]
+    span: Span
+    file: str = "<string>"          # where it is written: its mistakes are shown there
+    source: str = ""
+
+    @property
+    def carried(self) -> tuple[str, ...]:
+        """The names set by `init` (z among them if it is), in order."""
+        names: list[str] = []
+        for s in self.init:
+            if s.name not in names:
+                names.append(s.name)
+        return tuple(names)
+
+    @property
+    def own_estimate(self) -> bool:
+        """Whether `final distance = ...` gives the estimate without asking
+        for the compiler's."""
+        return any(s.name == "distance" for s in self.final) and not _calls(self.final, ESTIMATES)
+
+
+def split(decl: ast.FormulaDecl, file: str = "<string>", source: str = "") -> Formula:
+    """The formula's statements by phase; a misplaced one is a Mistake."""
+    phases: dict[str, list] = {"init": [], "step": [], "final": []}
+    for statement in decl.body:
+        phase = statement.phase if isinstance(statement, ast.Assign) else "step"
+        phases[phase].append(statement)
+        for inner in _nested(statement):
+            if isinstance(inner, ast.Assign) and inner.phase != "step":
+                raise Mistake(inner.span, f"'{inner.phase}' goes at the top of a formula, not inside 'if'")
+    return Formula(decl.name, tuple(p.name for p in decl.params), tuple(phases["init"]),
+                   tuple(phases["step"]), tuple(phases["final"]), decl.span, file, source)
+
+
+def _nested(statement) -> list:
+    found, stack = [], [statement]
+    while stack:
+        s = stack.pop()
+        if isinstance(s, ast.If):
+            for inner in (*s.then, *s.otherwise):
+                found.append(inner)
+                stack.append(inner)
+    return found
+
+
+def _calls(statements, names) -> bool:
+    stack = [s.value for s in statements if isinstance(s, ast.Assign)]
+    while stack:
+        e = stack.pop()
+        if isinstance(e, ast.Call):
+            if e.name in names:
+                return True
+            stack.extend(a.value for a in e.args)
+        elif isinstance(e, (ast.Binary,)):
+            stack.extend((e.left, e.right))
+        elif isinstance(e, ast.Unary):
+            stack.append(e.operand)
+        elif isinstance(e, ast.Vector):
+            stack.extend(e.items)
+        elif isinstance(e, (ast.Field, ast.Method)):
+            stack.append(e.receiver)
+    return False
+
+
+class Interpreter:
+    """Runs statements on an environment of Values (names -> Value).
+    `estimates` gives the compiler's estimates to `final` statements."""
+
+    def __init__(self, estimates: Callable[[str, list[Value], Span], Value] | None = None):
+        self.estimates = estimates
+
+    def run(self, statements, env: dict[str, Value], readonly: frozenset = frozenset()) -> dict[str, Value]:
+        env = dict(env)
+        for s in statements:
+            if isinstance(s, ast.Assign):
+                if s.name in readonly:
+                    raise Mistake(s.name_span, f"'{s.name}' cannot be assigned in a formula"
+                                               f"{' (it is a parameter)' if s.name != 'c' else ' (it is the constant)'}")
+                env[s.name] = self.expr(s.value, env)
+            else:
+                env = self.if_(s, env, readonly)
+        return env
+
+    def if_(self, s: ast.If, env: dict, readonly) -> dict:
+        condition = self.expr(s.condition, env)
+        if condition.type != "mask":
+            raise Mistake(s.condition.span, f"'if' needs a comparison (such as 'r < 1'), this is {_word(condition)}")
+        then, otherwise = self.run(s.then, env, readonly), self.run(s.otherwise, env, readonly)
+        merged = dict(env)
+        for name in set(then) | set(otherwise):
+            if name.startswith("__"):
+                continue
+            a, b = then.get(name), otherwise.get(name)
+            if a is None or b is None:
+                merged.pop(name, None)
+                merged.setdefault("__one_sided__", {})
+                merged["__one_sided__"] = {**merged["__one_sided__"], name: s.span}
+                continue
+            if a is b:
+                merged[name] = a
+                continue
+            if a.type != b.type:
+                raise Mistake(s.span, f"'{name}' is {_word(a)} after 'if' and {_word(b)} after 'else'")
+            merged[name] = _chosen(condition, a, b)
+        return merged
+
+    # ---- expressions ---------------------------------------------------------
+
+    def expr(self, e: ast.Expr, env: dict) -> Value:
+        if isinstance(e, ast.Number):
+            return number(ir.const(e.value))
+        if isinstance(e, ast.Name):
+            if e.name in env and not e.name.startswith("__"):
+                return env[e.name]
+            one_sided = env.get("__one_sided__", {})
+            if e.name in one_sided:
+                raise Mistake(e.span, f"'{e.name}' is set on only one side of the 'if' at line "
+                                      f"{one_sided[e.name].line}: set it on both, or before the 'if'")
+            if e.name in FUNCTIONS or e.name in ESTIMATES:
+                raise Mistake(e.span, f"'{e.name}' is a function: call it, e.g. '{e.name}(...)'")
+            raise Mistake(e.span, f"unknown name '{e.name}' in formula")
+        if isinstance(e, ast.Vector):
+            parts = [self.expr(x, env) for x in e.items]
+            for x, v in zip(e.items, parts):
+                if v.type == "mask":
+                    raise Mistake(x.span, "a vector's components must be numbers, this is a comparison")
+            items = tuple(c for v in parts for c in v.items)
+            if len(items) > 4:
+                raise Mistake(e.span, f"vectors have 2 to 4 components, this one has {len(items)}")
+            return _joined(parts)
+        if isinstance(e, ast.Unary):
+            v = self.expr(e.operand, env)
+            if v.type == "mask":
+                raise Mistake(e.span, "a comparison cannot be negated (swap the comparison instead)")
+            return replace(v, items=tuple(ir.neg(x) for x in v.items))
+        if isinstance(e, ast.Binary):
+            return self.binary(e, self.expr(e.left, env), self.expr(e.right, env))
+        if isinstance(e, ast.Field):
+            return self.field(e, self.expr(e.receiver, env))
+        if isinstance(e, ast.Call):
+            args = e.args
+            for a in args:
+                if a.name is not None:
+                    raise Mistake(a.span, f"'{e.name}' takes its arguments in order, without names")
+            values = [self.expr(a.value, env) for a in args]
+            if e.name in ESTIMATES:
+                if self.estimates is None:
+                    raise Mistake(e.name_span, f"'{e.name}' is the formula's estimate: use it in a 'final' line")
+                return self.estimates(e.name, values, e.span)
+            function = FUNCTIONS.get(e.name)
+            if function is None:
+                raise Mistake(e.name_span, f"unknown function '{e.name}' in formula")
+            return function.apply(e, values)
+        if isinstance(e, ast.Method):
+            raise Mistake(e.name_span, f"'.{e.name}(...)' transforms shapes; in a formula, call "
+                                       f"'{e.name}(z, ...)'")
+        raise Mistake(e.span, "not an expression a formula can compute")
+
+    def field(self, e: ast.Field, v: Value) -> Value:
+        if v.type not in VECTOR_TYPES:
+            raise Mistake(e.span, f"'.{e.name}' takes components of a vector, this is {_word(v)}")
+        if not e.name or any(ch not in _COMPONENTS[:len(v.items)] for ch in e.name) or len(e.name) > 4:
+            raise Mistake(e.name_span, f"'.{e.name}' is not a component of {_word(v)} "
+                                       f"(components: {', '.join(_COMPONENTS[:len(v.items)])})")
+        items = tuple(v.items[_COMPONENTS.index(ch)] for ch in e.name)
+        if len(items) == 1:
+            return replace(_dependent_scalar(v.degree, v), items=items)
+        # a projection does not lengthen: the bound a dr + b still holds
+        return replace(v, type=f"vec{len(items)}", items=items)
+
+    def binary(self, e: ast.Binary, a: Value, b: Value) -> Value:
+        op = e.op
+        if op in ("&", "|"):
+            if a.type != "mask" or b.type != "mask":
+                raise Mistake(e.span, f"'{op}' joins comparisons ('and' / 'or'); these are {_word(a)} and {_word(b)}")
+            return Value("mask", (ir.op("and" if op == "&" else "or", a.items[0], b.items[0]),),
+                         INDEPENDENT if a.independent and b.independent else None)
+        if "mask" in (a.type, b.type):
+            raise Mistake(e.span, f"'{op}' needs numbers or vectors, not a comparison")
+        if op in ("<", "<=", ">", ">=", "==", "!="):
+            if a.type != "num" or b.type != "num":
+                raise Mistake(e.span, f"'{op}' compares numbers, not {_word(a) if a.type != 'num' else _word(b)}"
+                                      f" (compare components or lengths)")
+            x, y = a.items[0], b.items[0]
+            test = {"<": ("lt", x, y), "<=": ("le", x, y), ">": ("lt", y, x), ">=": ("le", y, x),
+                    "==": ("eq", x, y), "!=": ("eq", x, y)}[op]
+            mask = ir.op(*test)
+            if op == "!=":
+                mask = ir.op("not", mask)
+            return Value("mask", (mask,), INDEPENDENT if a.independent and b.independent else None)
+        if a.type != "num" and b.type != "num" and a.type != b.type:
+            raise Mistake(e.span, f"'{op}' on vectors of different sizes ({len(a.items)} and {len(b.items)})")
+        size = max(len(a.items), len(b.items))
+        left = a.items * size if a.type == "num" else a.items
+        right = b.items * size if b.type == "num" else b.items
+        try:
+            items = tuple(ir.op(op, x, y) for x, y in zip(left, right))
+        except (ValueError, ZeroDivisionError, OverflowError):
+            raise Mistake(e.span, f"'{op}' is undefined for these values") from None
+        underivable = a.underivable or b.underivable
+        kind = "num" if size == 1 and a.type == "num" and b.type == "num" else f"vec{size}"
+        if op in ("+", "-"):
+            if kind == "num":
+                form = INDEPENDENT if a.independent and b.independent else None
+            elif "num" in (a.type, b.type):       # a number added to each component: a translation if constant
+                scalar, other = (a, b) if a.type == "num" else (b, a)
+                form = other.form if scalar.independent else None
+            else:
+                form = _summed_form(a.form, b.form)
+            return Value(kind, items, form, max(a.degree, b.degree), underivable)
+        if op == "*" or op == "/":
+            degree = a.degree + b.degree if op == "*" else a.degree - b.degree
+            if a.independent and b.independent:
+                return Value(kind, items, INDEPENDENT, 0.0, underivable)
+            scalar, other = (a, b) if a.type == "num" else (b, a) if b.type == "num" else (None, None)
+            form = None
+            if kind != "num" and scalar is not None and scalar.independent and (op == "*" or scalar is b):
+                size_ = ir.op("abs", scalar.items[0])
+                form = _scaled_form(other.form, size_ if op == "*" else ir.div(ONE, size_))
+            return Value(kind, items, form, degree, underivable)
+        raise Mistake(e.span, f"unknown operator '{op}'")
+
+
+def _joined(parts: list[Value]) -> Value:
+    """A vector from numbers and vectors: (z, w) is a 4-vector."""
+    items = tuple(c for v in parts for c in v.items)
+    dependent = [v for v in parts if not v.independent]
+    form = INDEPENDENT
+    if len(dependent) == 1 and dependent[0].type in VECTOR_TYPES:
+        form = dependent[0].form         # z with constants beside it: as long as z
+    elif dependent:
+        form = None
+    return Value(f"vec{len(items)}" if len(items) > 1 else "num", items, form,
+                 max((v.degree for v in parts), default=0.0),
+                 next((v.underivable for v in parts if v.underivable), None))
+
+
+def _chosen(condition: Value, a: Value, b: Value) -> Value:
+    """`a` where the condition holds, else `b`, as an IR branch (only the
+    rays that need a side compute it)."""
+    forms = a.form is not None and b.form is not None
+    then = (*a.items, *(a.form if forms else ()))
+    otherwise = (*b.items, *(b.form if forms else ()))
+    chosen = ir.branch(condition.items[0], then, otherwise)
+    n = len(a.items)
+    form = (chosen[n], chosen[n + 1]) if forms else None
+    if forms and all(ir.is_const(x) and x.value == 0.0 for x in form):
+        form = INDEPENDENT
+    return Value(a.type, tuple(chosen[:n]), form, max(a.degree, b.degree), a.underivable or b.underivable)
+
+
+# ---- functions -----------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Function:
+    """A function formulas can call: its arguments' types (`v` a vector of
+    z's size, `n` a number, `3` a 3-vector, `4` a 4-vector, `any` a
+    number or vector, `m` a comparison; `?` after a type: optional), and
+    how it computes."""
+    arguments: tuple[str, ...]
+    compute: Callable
+    about: str
+
+    def apply(self, e: ast.Call, values: list[Value]) -> Value:
+        required = [a for a in self.arguments if not a.endswith("?")]
+        if not len(required) <= len(values) <= len(self.arguments):
+            count = f"{len(required)}" if len(required) == len(self.arguments) else \
+                f"{len(required)} to {len(self.arguments)}"
+            raise Mistake(e.span, f"'{e.name}' takes {count} argument{'s' if len(self.arguments) != 1 else ''} "
+                                  f"({self.about}), not {len(values)}")
+        size = None
+        for arg, want, v in zip(e.args, self.arguments, values):
+            want = want.rstrip("?")
+            ok = {"n": v.type == "num", "3": v.type == "vec3", "4": v.type == "vec4", "m": v.type == "mask",
+                  "v": v.type in VECTOR_TYPES, "any": v.type != "mask"}[want]
+            if want == "v" and ok:
+                if size is not None and len(v.items) != size:
+                    raise Mistake(arg.span, f"'{e.name}' needs vectors of one size ({size} and {len(v.items)})")
+                size = len(v.items)
+            if not ok:
+                words = {"n": "a number", "3": "a 3-vector", "4": "a 4-vector", "m": "a comparison",
+                         "v": "a vector", "any": "a number or a vector"}
+                raise Mistake(arg.span, f"'{e.name}' needs {words[want]} here ({self.about}), this is {_word(v)}")
+        _CURRENT_CALL[0] = e.span
+        try:
+            return self.compute(*values)
+        except (ValueError, ZeroDivisionError, OverflowError):
+            raise Mistake(e.span, f"'{e.name}' is undefined for these values") from None
+        finally:
+            _CURRENT_CALL[0] = None
+
+
+_CURRENT_CALL: list = [None]     # the call being computed: where an underivable operation is
+
+
+def _block(make: Callable, conformal_args: int = 1, degree: Callable | None = None):
+    """A building block of formulas.py as a function: its result keeps z's
+    form times the block's factor where the block has one and its other
+    arguments do not depend on the point."""
+    def compute(z: Value, *rest: Value):
+        block = make(z.items, *(r.items if r.type in VECTOR_TYPES else r.items[0] for r in rest))
+        others_independent = all(r.independent for r in rest)
+        form = _scaled_form(z.form, block.factor) if block.factor is not None and others_independent else None
+        if z.independent and others_independent:
+            form = INDEPENDENT
+        grown = degree(rest) if degree else z.degree
+        return Value(f"vec{len(block.z)}", tuple(block.z), form, grown,
+                     next((v.underivable for v in (z, *rest) if v.underivable), None))
+    return compute
+
+
+def _power_degree(rest):
+    power = rest[0].items[0]
+    return power.value if ir.is_const(power) else math.inf
+
+
+def _map(name: str, degree: Callable[[list[float]], float], derivable: bool = True):
+    """A function of numbers applied per component (numbers broadcast)."""
+    def compute(*values: Value):
+        size = max(len(v.items) for v in values)
+        lanes = [v.items * size if v.type == "num" else v.items for v in values]
+        if any(len(l) != size for l in lanes):
+            raise ValueError("sizes")
+        items = tuple(ir.op(name, *args) for args in zip(*lanes))
+        independent = all(v.independent for v in values)
+        underivable = next((v.underivable for v in values if v.underivable), None)
+        if not derivable and not independent:
+            underivable = underivable or _CURRENT_CALL[0]
+        form = INDEPENDENT if independent else None
+        if name == "abs" and size > 1 and values[0].form is not None:
+            form = values[0].form              # the octant fold: lengths kept
+        kind = "num" if size == 1 else f"vec{size}"
+        return Value(kind, items, form, 0.0 if independent else degree([v.degree for v in values]), underivable)
+    return compute
+
+
+def _select(condition: Value, a: Value, b: Value) -> Value:
+    if a.type != b.type:
+        raise ValueError("types")
+    return _chosen(condition, a, b)
+
+
+def _vector_fn(function: Callable, result: str):
+    def compute(*values: Value):
+        items = function(*(v.items for v in values))
+        items = items if isinstance(items, tuple) else (items,)
+        return replace(_dependent_scalar(max(v.degree for v in values) * (2 if function is ir.dot else 1), *values),
+                       type=result if result != "same" else values[0].type, items=items)
+    return compute
+
+
+def _normalize(v):
+    inverse = ir.div(ONE, ir.length(v))
+    return tuple(ir.mul(x, inverse) for x in v)
+
+
+def _cross(a, b):
+    return (ir.sub(ir.mul(a[1], b[2]), ir.mul(a[2], b[1])), ir.sub(ir.mul(a[2], b[0]), ir.mul(a[0], b[2])),
+            ir.sub(ir.mul(a[0], b[1]), ir.mul(a[1], b[0])))
+
+
+def _quaternion_multiply(a: Value, b: Value) -> Value:
+    items = formulas.quaternion_multiply(a.items, b.items)
+    form = None
+    if a.independent and b.independent:
+        form = INDEPENDENT
+    elif a.independent or b.independent:          # times a constant quaternion: a scale and a rotation
+        fixed, moving = (a, b) if a.independent else (b, a)
+        form = _scaled_form(moving.form, ir.length(fixed.items))
+    return Value("vec4", items, form, a.degree + b.degree, a.underivable or b.underivable)
+
+
+def _smooth(name):
+    return lambda d: max(d) if name in ("abs", "min", "max", "clamp", "mix") else \
+        (max(d) / 2 if name == "sqrt" else math.inf)
+
+
+FUNCTIONS: dict[str, Function] = {
+    # building blocks (formulas.py), each with its derivative rule
+    "box_fold": Function(("v", "n"), _block(formulas.box_fold), "box_fold(z, limit)"),
+    "sphere_fold": Function(("v", "n", "n"), _block(formulas.sphere_fold),
+                            "sphere_fold(z, min_radius, fixed_radius)"),
+    "sphere_invert": Function(("v", "n"), _block(formulas.sphere_invert), "sphere_invert(z, radius)"),
+    "reflect": Function(("v", "v", "n?"), _block(formulas.reflect), "reflect(z, normal, offset)"),
+    "plane_fold": Function(("v", "v", "n?"), _block(formulas.plane_fold), "plane_fold(z, normal, offset)"),
+    "abs_fold": Function(("v",), _block(formulas.abs_fold), "abs_fold(z)"),
+    "sort_fold": Function(("3",), _block(formulas.sort_fold), "sort_fold(z)"),
+    "rotate": Function(("3", "3", "n"), _block(formulas.rotate), "rotate(z, axis, degrees)"),
+    "scale": Function(("v", "n", "v?"), _block(formulas.scale), "scale(z, factor, centre)"),
+    "stretch": Function(("v", "v"), _block(formulas.stretch), "stretch(z, factors)"),
+    "translate": Function(("v", "v"), _block(formulas.translate), "translate(z, offset)"),
+    "triplex_power": Function(("3", "n"), _block(formulas.triplex_power, degree=_power_degree),
+                              "triplex_power(z, power)"),
+    "quaternion_square": Function(("4",), _block(formulas.quaternion_square, degree=lambda rest: 2.0),
+                                  "quaternion_square(q)"),
+    "quaternion_multiply": Function(("4", "4"), _quaternion_multiply, "quaternion_multiply(a, b)"),
+    # math
+    **{name: Function(("any",), _map(name, _smooth(name)), f"{name}(x)")
+       for name in ("sin", "cos", "tan", "asin", "acos", "atan", "sqrt", "abs", "exp", "log", "radians", "degrees")},
+    **{name: Function(("any",), _map(name, lambda d: 0.0, derivable=False), f"{name}(x)") for name in ("floor", "round")},
+    "atan2": Function(("any", "any"), _map("atan2", _smooth("atan2")), "atan2(y, x)"),
+    "min": Function(("any", "any"), _map("min", _smooth("min")), "min(a, b)"),
+    "max": Function(("any", "any"), _map("max", _smooth("max")), "max(a, b)"),
+    "pow": Function(("any", "any"), _map("pow", lambda d: math.inf), "pow(x, y)"),
+    "clamp": Function(("any", "any", "any"), _map("clamp", _smooth("clamp")), "clamp(x, low, high)"),
+    "mix": Function(("any", "any", "any"), _map("mix", _smooth("mix")), "mix(a, b, t)"),
+    "select": Function(("m", "any", "any"), _select, "select(condition, if_true, if_false)"),
+    "length": Function(("v",), _vector_fn(ir.length, "num"), "length(v)"),
+    "dot": Function(("v", "v"), _vector_fn(ir.dot, "num"), "dot(a, b)"),
+    "cross": Function(("3", "3"), _vector_fn(_cross, "vec3"), "cross(a, b)"),
+    "normalize": Function(("v",), _vector_fn(_normalize, "same"), "normalize(v)"),
+}
+
+
+# ---- the orbit ------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Use:
+    """A formula with its arguments (IR, in its parameters' order), applied
+    `count` times in turn in a hybrid."""
+    formula: Formula
+    args: tuple
+    count: int = 1
+
+
+@dataclass(frozen=True)
+class Orbit:
+    distance: ir.Expr
+    trap: tuple[ir.Expr, ...]       # origin, |x|, |y|, |z| (empty unless asked for)
+    scalar: bool                    # the estimate from a scalar running derivative (else the Jacobian or own)
+
+
+def _arg_value(arg) -> Value:
+    return vector(arg.items) if isinstance(arg, ir.Vec) else number(arg)
+
+
+def _environment(use: Use) -> dict[str, Value]:
+    return {name: _arg_value(a) for name, a in zip(use.formula.params, use.args)}
+
+
+def _readonly(use: Use) -> frozenset:
+    return frozenset(("c",) + use.formula.params)
+
+
+def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.Expr,
+          bailout: ir.Expr | None = None, julia: ir.Vec | None = None, trap: bool = False,
+          jacobian: bool | None = None, where: Span | None = None) -> Orbit:
+    """The estimate of the fractal of a formula, or a hybrid of several
+    applied in turn (`count` steps each), `iterations` steps in all; a ray
+    stops once |z| > bailout or a step would take z beyond OVERFLOW_LENGTH.
+    Without a bailout, escape-time formulas take DEFAULT_BAILOUT and the
+    others none. Raises Mistake (at `where`, the use, for the use's own
+    mistakes)."""
+    interpreter = Interpreter()
+    point_value = vector(point, (ONE, ZERO), 1.0)
+
+    # init: each formula's carried values, in order; z starts as the point
+    z = point_value
+    carried: list[dict[str, Value]] = []
+    for use in _unique(sequence):
+        env = {**_environment(use), "z": z, "c": _constant(julia, z, point)}
+        out = interpreter.run(use.formula.init, env, _readonly(use))
+        z = out["z"]
+        if z.type not in ("vec3", "vec4"):
+            where = next(s for s in use.formula.init if s.name == "z")
+            raise Mistake(where.value.span, f"z must be a 3- or 4-vector, this is {_word(z)}")
+        carried.append({name: out[name] for name in use.formula.carried if name != "z"})
+    if julia is not None and len(julia.items) != len(z.items):
+        raise Mistake(where or sequence[0].formula.span, f"'julia' must be a {len(z.items)}-vector like z, "
+                                                          f"not a {len(julia.items)}-vector")
+    c = _constant(julia, z, point)
+    uses = _unique(sequence)
+
+    # which carried values depend on the point (the scalar derivative then cannot follow them)
+    dependent: list[set] = [set() for _ in uses]
+    for _ in range(8):
+        probes = _step_values(interpreter, uses, carried, dependent, z, c)
+        grown = [{n for n, v in values.items() if n != "z" and not v.independent} for values in probes]
+        if all(g <= d for g, d in zip(grown, dependent)):
+            break
+        dependent = [d | g for d, g in zip(dependent, grown)]
+    z_forms = [values["z"] for values in probes]
+    hybrid_dims = {len(use_z.items) for use_z in z_forms} | {len(z.items)}
+    for use, value in zip(uses, z_forms):
+        if value.type != z.type and len(uses) > 1 and len(hybrid_dims) > 1:
+            raise Mistake(where or use.formula.span, "a hybrid's formulas must all work on 3-vectors "
+                                                     "or all on 4-vectors")
+        if value.type != z.type:
+            where = _last_z(use.formula)
+            raise Mistake(where.span if where else use.formula.span,
+                          f"z is {_word(z)} before the step and {_word(value)} after it")
+    own = [u for u in uses if u.formula.own_estimate]
+    if own and len(sequence) > 1:
+        raise Mistake(where or own[0].formula.span, f"'{own[0].formula.name}' gives its own 'final distance': "
+                                           "it cannot be part of a hybrid")
+    if not own:
+        for use, value in zip(uses, z_forms):
+            if value.underivable is not None:
+                raise Mistake(value.underivable, "the distance estimate cannot be derived through this "
+                                                 "(it has no derivative): give the formula its own "
+                                                 "'final distance = ...'")
+    conformal = all(v.form is not None for v in z_forms) and not own
+    use_scalar = conformal if jacobian is None else (not jacobian and conformal)
+    escape = any(v.degree > 1.5 for v in z_forms)
+    if bailout is None and escape:
+        bailout = ir.const(DEFAULT_BAILOUT)
+
+    steps = [(k, use) for k, use in enumerate(uses) for _ in range(_count(sequence, use))]
+    period = len(steps)
+    flat_carried = [(k, name) for k, values in enumerate(carried) for name in values]
+    dims = len(z.items)
+
+    def round_(state):
+        i = 0
+        zs = state[:dims]
+        i += dims
+        values = [dict(c_) for c_ in carried]
+        for k, name in flat_carried:
+            width = len(carried[k][name].items)
+            values[k][name] = replace(carried[k][name], items=tuple(state[i:i + width]),
+                                      form=INDEPENDENT if name not in dependent[k] else None)
+            i += width
+        dr, stopped, counter = state[i], state[i + 1], state[i + 2]
+        traps = state[i + 3:]
+        z_now = Value(z.type, tuple(zs), (ONE, ZERO), 1.0)
+        for j, (k, use) in enumerate(steps):
+            # with one step per iteration the loop's condition stops the ray
+            going = ir.Const(1.0, ir.MASK)
+            if period > 1:
+                going = ir.op("and", ir.op("not", stopped), ir.op("lt", ir.add(counter, ir.const(float(j))),
+                                                                  iterations))
+                if bailout is not None:
+                    going = ir.op("and", going, _inside(z_now.items, bailout))
+            env = {**_environment(use), **values[k], "z": z_now, "c": c}
+            out = interpreter.run(use.formula.step, env, _readonly(use))
+            moved = out["z"]
+            length2 = ir.dot(moved.items, moved.items)
+            ok = ir.op("and", going, ir.op("le", length2, ir.const(OVERFLOW_LENGTH ** 2)))
+            items = tuple(ir.op("select", ok, a, b) for a, b in zip(moved.items, z_now.items))
+            for name in values[k]:
+                new = out[name]
+                values[k][name] = replace(values[k][name], items=tuple(
+                    ir.op("select", ok, a, b) for a, b in zip(new.items, values[k][name].items)))
+            if use_scalar:
+                a, b = moved.form
+                grown = ir.op("min", ir.add(ir.mul(a, dr), b), ir.const(MAX_DERIVATIVE))
+                dr = ir.op("select", ok, grown, dr)
+            stopped = ir.op("or", stopped, ir.op("and", going, ir.op("not", ok)))
+            if trap:
+                traps = tuple(ir.op("select", ok, t, old) for t, old in
+                              zip(_trap_added(traps, items), traps))
+            z_now = Value(z.type, items, (ONE, ZERO), 1.0)
+        flat = [x for k, name in flat_carried for x in values[k][name].items]
+        return (*z_now.items, *flat, dr, stopped, ir.add(counter, ir.const(float(period))), *traps)
+
+    init = (*z.items, *(x for k, name in flat_carried for x in carried[k][name].items), ONE,
+            ir.Const(0.0, ir.MASK), ZERO, *((ir.const(1e30),) * 4 if trap else ()))
+    count = iterations if period == 1 else ir.op("floor", ir.div(ir.add(iterations, ir.const(period - 1.0)),
+                                                                   ir.const(float(period))))
+    stopped_at = dims + sum(len(carried[k][name].items) for k, name in flat_carried) + 1
+
+    def condition(state):
+        going = ir.op("not", state[stopped_at])
+        return going if bailout is None else ir.op("and", going, _inside(state[:dims], bailout))
+
+    final = ir.loop(init, count, round_, condition)
+    z_final = final[:dims]
+    i = dims
+    finals = [dict(c_) for c_ in carried]
+    for k, name in flat_carried:
+        width = len(carried[k][name].items)
+        finals[k][name] = replace(carried[k][name], items=tuple(final[i:i + width]))
+        i += width
+    dr = final[i]
+    traps = tuple(final[i + 3:]) if trap else ()
+
+    def derived(name: str, args: list[Value], span: Span) -> Value:
+        offset = args[0].items[0] if args else ZERO
+        if args and (len(args) > 1 or args[0].type != "num"):
+            raise Mistake(span, f"'{name}' takes at most one number (the linear estimate's offset)")
+        return number(_estimate(name == "escape_time_estimate", z_final, dr, point, use_scalar, offset))
+
+    last = uses[-1]
+    if last.formula.final:
+        env = {**_environment(last), **finals[-1], "z": Value(z.type, tuple(z_final), None, 1.0), "c": c}
+        out = Interpreter(derived).run(last.formula.final, env, _readonly(last))
+        distance = out.get("distance")
+        if distance is None:
+            where = last.formula.final[-1]
+            raise Mistake(where.span, "'final' lines must set 'distance' (the estimate)")
+        if distance.type != "num":
+            where = next(s for s in reversed(last.formula.final) if s.name == "distance")
+            raise Mistake(where.value.span, f"'distance' must be a number, this is {_word(distance)}")
+        de = distance.items[0]
+    else:
+        de = _estimate(escape, z_final, dr, point, use_scalar, ZERO)
+    return Orbit(de, traps, use_scalar)
+
+
+def _estimate(escape: bool, z, dr, point, scalar: bool, offset: ir.Expr) -> ir.Expr:
+    if not scalar:
+        rebuilt, rows = derive.jacobian(z, point)
+        return derive.escape_time_estimate(rebuilt, rows) if escape else \
+            derive.linear_estimate(rebuilt, rows, offset)
+    r = ir.length(z)
+    if escape:
+        de = ir.div(ir.mul(ir.mul(ir.const(0.5), ir.op("log", r)), r), ir.op("abs", dr))
+        return ir.op("select", ir.op("eq", r, ZERO), ZERO, ir.op("min", de, ir.const(1e30)))
+    return ir.div(ir.sub(r, offset), ir.op("abs", dr))
+
+
+def _inside(z, bailout: ir.Expr) -> ir.Expr:
+    return ir.op("le", ir.dot(z, z), ir.mul(bailout, bailout))
+
+
+def _trap_added(traps, z) -> tuple:
+    return (ir.op("min", traps[0], ir.length(z[:3])), *(ir.op("min", t, ir.op("abs", x)) for t, x in zip(traps[1:], z)))
+
+
+def _constant(julia, z: Value, point) -> Value:
+    """c: the point (beside zeros where z has a fourth component), or the Julia constant."""
+    if julia is not None:
+        return vector(julia.items)
+    extra = (ZERO,) * (len(z.items) - 3)
+    return vector((*point, *extra), (ZERO, ONE), 1.0)
+
+
+def _unique(sequence) -> list:
+    seen, out = set(), []
+    for use in sequence:
+        key = (use.formula.name, use.args)
+        if key not in seen:
+            seen.add(key)
+            out.append(use)
+    return out
+
+
+def _count(sequence, use) -> int:
+    return sum(u.count for u in sequence if (u.formula.name, u.args) == (use.formula.name, use.args))
+
+
+def _last_z(formula: Formula):
+    found = None
+    for s in formula.step:
+        for inner in (s, *_nested(s)):
+            if isinstance(inner, ast.Assign) and inner.name == "z":
+                found = inner
+    return found
+
+
+def _step_values(interpreter, uses, carried, dependent, z: Value, c: Value) -> list[dict]:
+    """Each formula's values after one step from symbolic state, for
+    their forms (which values depend on the point)."""
+    results = []
+    probe_z = Value(z.type, tuple(ir.Var(f"z{i}", ir.REAL) for i in range(len(z.items))), (ONE, ZERO), 1.0)
+    for k, use in enumerate(uses):
+        env = {**_environment(use), "z": probe_z, "c": c}
+        for name, v in carried[k].items():
+            env[name] = replace(v, items=tuple(ir.Var(f"{name}{i}", ir.REAL) for i in range(len(v.items))),
+                                form=None if name in dependent[k] else INDEPENDENT)
+        out = interpreter.run(use.formula.step, env, _readonly(use))
+        if _last_z(use.formula) is None:
+            raise Mistake(use.formula.span, f"'{use.formula.name}' never sets z in its step")
+        for name, v in carried[k].items():
+            if name not in out:
+                raise Mistake(use.formula.span, f"'{name}' is set on only one side of an 'if'")
+            if out[name].type != v.type:
+                raise Mistake(use.formula.span, f"'{name}' starts as {_word(v)} and becomes {_word(out[name])}")
+        results.append({"z": out["z"], **{name: out[name] for name in carried[k]}})
+    return results
