@@ -8,6 +8,7 @@ checks accept silently, so one mistake gives one message.
 from __future__ import annotations
 
 import difflib
+from functools import lru_cache
 import itertools
 import math
 from dataclasses import dataclass, replace
@@ -17,6 +18,7 @@ from .errors import Diagnostic, SceneError, Span, diagnostic
 from .program import (DEFAULT_MATERIAL, Camera, CameraPath, CheckedScene, Coloring, Combination, Fog, Fractal, Glow,
                       Keyframe, Light, Material, ParamCheck, ParamInfo, Primitive, RenderSettings, Shape, Slice,
                       Transformed, WithMaterial)
+from .resources import resource_dir
 from .stdlib import COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
 
 # The language's value types.
@@ -62,7 +64,7 @@ class _Failed(Exception):
 
 
 class _Checker:
-    def __init__(self, program: ast.Program):
+    def __init__(self, program: ast.Program, with_library: bool = True):
         self.program = program
         self.errors: list[Diagnostic] = []
         self.library = library()
@@ -74,7 +76,7 @@ class _Checker:
         self.colors: dict[tuple, str] = {}
         self.param_checks: list[ParamCheck] = []
         self.shape_sizes: dict[int, tuple[Shape, int]] = {}
-        self.formulas: dict[str, tuple[formula_code.Formula, Signature] | None] = {}
+        self.formulas: dict[str, tuple[formula_code.Formula, Signature] | None] = dict(library_formulas() if with_library else ())
 
     # ---- diagnostics -------------------------------------------------------
 
@@ -114,8 +116,8 @@ class _Checker:
             if isinstance(decl, ast.ParamDecl) and decl.name not in self.params:
                 self.declare_param(decl)
         for decl in decls:
-            if isinstance(decl, ast.FormulaDecl) and decl.name not in self.formulas:
-                self.declare_formula(decl)
+            if isinstance(decl, ast.FormulaDecl) and names.get(decl.name) is decl.name_span:
+                self.declare_formula(decl)     # a file's formula replaces the library's of its name
         self.materials[DEFAULT_MATERIAL] = Material(
             DEFAULT_MATERIAL, ir.vec(*(ir.const(0.8) for _ in range(3))),
             ir.const(0.3), ir.const(32.0), ir.const(0.0), ir.const(0.0), ir.const(1.5))
@@ -270,7 +272,11 @@ class _Checker:
             formula_code.orbit(formula.data, _PROBE_POINT, ir.const(2.0), values["bailout"], values["julia"],
                                where=e.span)
         except formula_code.Mistake as mistake:
-            self.fail(mistake.span, mistake.message)
+            inside = next((u.formula for u in formula.data if u.formula.file != self.program.file), None)
+            if inside is None or mistake.span == e.span:
+                self.fail(mistake.span, mistake.message)
+            self.fail(e.span, f"{mistake.message} (in the library's '{inside.name}', "
+                              f"{inside.file}:{mistake.span.line})")
         return self.shape(Fractal(formula.data, values["iterations"], values["bailout"], values["julia"],
                                   values["bound"], e.span))
 
@@ -939,6 +945,23 @@ FORMULA_FORMS = {
 }
 # The point formulas are tried at when checked
 _PROBE_POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
+
+
+@lru_cache(maxsize=1)
+def library_formulas() -> tuple[tuple[str, tuple], ...]:
+    """The formulas of the library (stdlib_frac/*.frac), checked: every
+    scene can use them; a file's own formula of the same name replaces one."""
+    from .parse import parse          # parse imports nothing of check; kept local as a late need
+    found = []
+    for path in sorted(resource_dir("stdlib_frac").glob("*.frac")):
+        program = parse(path.read_text(), str(path))
+        checker = _Checker(program, with_library=False)
+        for decl in program.decls:
+            checker.declare_formula(decl)
+        if checker.errors:
+            raise SceneError(checker.errors)
+        found.extend(checker.formulas.items())
+    return tuple(found)
 
 
 def check(program: ast.Program) -> CheckedScene:
