@@ -315,7 +315,10 @@ class Scene:
             "worldToCamera": " ".join(f"{x:.9g}" for x in run.world_to_camera(camera).flat),
             "worldToNDC": " ".join(f"{x:.9g}" for x in
                                    run.world_to_ndc(camera, settings.width, settings.height).flat),
+            "camera.projection": camera.projection, "camera.stereo": camera.stereo,
         }
+        if (camera.projection, camera.stereo) != ("pinhole", "none"):
+            del metadata["worldToNDC"]     # a single pinhole's projection, no other camera's
         if len(self.checked.source.encode()) <= SCENE_TEXT_LIMIT:
             metadata["scene_text"] = self.checked.source
         for f in fields(RenderSettings):

@@ -15,9 +15,9 @@ from dataclasses import dataclass, replace
 
 from . import ast, formula_code, ir
 from .errors import Diagnostic, SceneError, Span, diagnostic
-from .program import (DEFAULT_MATERIAL, Camera, CameraPath, CheckedScene, Coloring, Combination, Fog, Fractal, Glow,
-                      Keyframe, Light, Material, ParamCheck, ParamInfo, Primitive, RenderSettings, Shape, Slice,
-                      Transformed, WithMaterial)
+from .program import (DEFAULT_MATERIAL, PROJECTIONS, STEREO_LAYOUTS, Camera, CameraPath, CheckedScene, Coloring,
+                      Combination, Fog, Fractal, Glow, Keyframe, Light, Material, ParamCheck, ParamInfo, Primitive,
+                      RenderSettings, Shape, Slice, Transformed, WithMaterial)
 from .resources import resource_dir
 from .stdlib import COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
 
@@ -814,7 +814,9 @@ class _Checker:
         a param of the same name."""
         if decl is None:
             return None
-        keys = dict(CAMERA_KEYS)
+        # the camera keys a path animates (a projection and stereo layout are the block's)
+        animated = [key for key in CAMERA_KEYS if key in Keyframe.__dataclass_fields__]
+        keys = {key: CAMERA_KEYS[key] for key in animated}
         for name, info in self.params.items():
             in_range = (f"{info.low!r}..{info.high!r}",) if None not in (info.low, info.high) else ()
             keys.setdefault(name, _P(name, "num", None, *in_range))
@@ -826,7 +828,7 @@ class _Checker:
                 self.error(frame.time_span, f"keyframe times must increase: {frame.time:g} does not come after "
                                             f"{before.time:g} (line {before.span.line})")
             found = self.entries(frame.block, keys, "path")
-            camera = {key: found.pop(key) for key in CAMERA_KEYS if key in found}
+            camera = {key: found.pop(key) for key in animated if key in found}
             if "position" not in camera:
                 if not any(e.key == "position" for e in frame.block.entries):
                     self.error(frame.time_span, f"the keyframe at {frame.time:g} needs a 'position'")
@@ -909,7 +911,9 @@ MATERIAL_KEYS = _keys(_P("color", "vec3", None, "0..1000"), _P("specular", "num"
                       _P("transparency", "num", None, "0..1"), _P("ior", "num", None, "1..10"))
 CAMERA_KEYS = _keys(_P("position", "vec3"), _P("target", "vec3"), _P("up", "vec3", None, "nonzero"),
                     _P("fov", "num", None, ">0", "<180"), _P("aperture", "num", None, ">=0"),
-                    _P("focus", "num", None, ">0"))
+                    _P("focus", "num", None, ">0"), _P("projection", f"word:{'|'.join(PROJECTIONS)}"),
+                    _P("fisheye_fov", "num", None, ">0", "<=360"),
+                    _P("stereo", f"word:{'|'.join(STEREO_LAYOUTS)}"), _P("eye_separation", "num", None, ">=0"))
 _LIGHT_COMMON = (_P("color", "vec3", None, ">=0"), _P("intensity", "num", None, ">=0"),
                  _P("shadows", "word:none|hard|soft"), _P("softness", "num", None, ">0"))
 LIGHT_KEYS = {"directional": _keys(_P("direction", "vec3", None, "nonzero"), *_LIGHT_COMMON),

@@ -594,10 +594,12 @@ _HEADER = """\
 //     One launch of global size (pitch / LANES_X, rows / LANES_Y) at x0 =
 //     y0 = 0 renders the image; launches over parts of it (tiles: x0, y0
 //     multiples of the block) fill those parts.
-//     camera: 15 values: position xyz, forward xyz, right xyz, up xyz (the
+//     camera: 19 values: position xyz, forward xyz, right xyz, up xyz (the
 //     orthonormal frame of LANGUAGE.md's camera model), tan(fov / 2), lens
-//     aperture (diameter) and focus distance (the last two are read only by
-//     a kernel with depth of field; 13 values suffice otherwise).
+//     aperture (diameter), focus distance, projection (0 pinhole, 1 fisheye,
+//     2 equirectangular), a fisheye's half angle across the height
+//     (radians), stereo layout (0 none, 1 side by side, 2 top and bottom)
+//     and eye separation (docs/looks.md).
 //     samples: anti-aliasing samples per pixel; seed: jitter seed.
 //   distance_at_points(__global const {scalar} *points, __global {scalar} *distances,
 //                      __constant {scalar} *params, int count)

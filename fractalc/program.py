@@ -121,6 +121,12 @@ class Material:
 DEFAULT_MATERIAL = "(default)"
 
 
+# A camera's projections and stereo layouts, in the order of their codes in
+# the kernel's camera block (stdlib_cl/raymarch.cl, CAMERA_PROJECTION).
+PROJECTIONS = ("pinhole", "fisheye", "equirectangular")
+STEREO_LAYOUTS = ("none", "side_by_side", "top_bottom")
+
+
 @dataclass(frozen=True)
 class Camera:
     position: Vector3 = (0.0, -5.0, 2.0)
@@ -129,6 +135,11 @@ class Camera:
     fov: float = 45.0
     aperture: float = 0.0
     focus: float | None = None
+    projection: str = "pinhole"      # PROJECTIONS
+    fisheye_fov: float = 180.0       # a fisheye's angle across the image height, degrees
+    stereo: str = "none"             # STEREO_LAYOUTS: where the two eyes' images go
+    eye_separation: float = 0.065    # distance between the eyes of a stereo camera
+
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from .build import Device
 from .emit import lane_block
 from .errors import RenderError
 from .passes import DEFAULT_CHANNELS
-from .program import Camera
+from .program import PROJECTIONS, STEREO_LAYOUTS, Camera
 
 CHANNELS = DEFAULT_CHANNELS   # of a pixel, as in a kernel without extra passes (passes.channels)
 # Tiles: launches of at most this many pixels (GPU watchdogs; progress).
@@ -40,8 +40,10 @@ class Frame:
 
 
 def camera_block(camera: Camera) -> tuple[float, ...]:
-    """position, forward, right, up', tan(fov/2), aperture, focus distance:
-    LANGUAGE.md's camera model."""
+    """position, forward, right, up', tan(fov/2), aperture, focus distance
+    (LANGUAGE.md's camera model), then the projection, the fisheye's half
+    angle (radians), the stereo layout and the eye separation
+    (docs/looks.md#cameras)."""
     position = np.array(camera.position, dtype=np.float64)
     forward = np.array(camera.target, dtype=np.float64) - position
     forward /= np.linalg.norm(forward)
@@ -52,7 +54,9 @@ def camera_block(camera: Camera) -> tuple[float, ...]:
     focus = camera.focus if camera.focus is not None else float(
         np.linalg.norm(np.array(camera.target, dtype=np.float64) - position))
     return tuple(float(x) for x in (*position, *forward, *right, *up, tan_half_fov,
-                                    camera.aperture, focus))
+                                    camera.aperture, focus, PROJECTIONS.index(camera.projection),
+                                    math.radians(camera.fisheye_fov) / 2.0,
+                                    STEREO_LAYOUTS.index(camera.stereo), camera.eye_separation))
 
 
 def world_to_camera(camera: Camera) -> np.ndarray:
