@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
-from . import __version__, program, run
+from . import __version__, pathtrace, program, run
 from .build import build, open_device
 from .check import FLOAT_MAX, RENDER_KEYS, check, check_param_values, check_value, in_float_range
 from .emit import Target, emit, uniform_source
@@ -285,11 +285,15 @@ class Scene:
         program, target = self._program(settings, camera)
         frame = run.Frame(settings.width, settings.height, settings.samples, seed,
                           run.camera_block(camera))
-        bar = run.terminal_progress(settings.width * settings.height) if progress else None
+        path_traced = settings.integrator == "path"    # in passes of samples (pathtrace.pass_frames)
+        passes = len(pathtrace.pass_frames(frame)) if path_traced else 1
+        bar = run.terminal_progress(settings.width * settings.height * passes) if progress else None
         start = time.perf_counter()
         try:
-            pixels = run.render(program, self.device, frame, self._param_values(), target.lanes,
-                                target.double, bar.update if bar else None, names)
+            def render_frame(part):
+                return run.render(program, self.device, part, self._param_values(), target.lanes,
+                                  target.double, bar.update if bar else None, names)
+            pixels = pathtrace.render_passes(render_frame, frame) if path_traced else render_frame(frame)
         except MemoryError:   # the host's image array: a runtime failure, in one line
             raise RenderError(f"out of memory for a {settings.width}x{settings.height} image") from None
         finally:

@@ -16,8 +16,8 @@ from dataclasses import dataclass, replace
 from . import ast, formula_code, ir
 from .errors import Diagnostic, SceneError, Span, diagnostic
 from .program import (DEFAULT_MATERIAL, PROJECTIONS, STEREO_LAYOUTS, Camera, CameraPath, CheckedScene, Coloring,
-                      Combination, Fog, Fractal, Glow, Keyframe, Light, Material, ParamCheck, ParamInfo, Primitive,
-                      RenderSettings, Shape, Slice, Transformed, WithMaterial)
+                      Combination, Environment, Fog, Fractal, Glow, Keyframe, Light, Material, ParamCheck, ParamInfo,
+                      Primitive, RenderSettings, Shape, Slice, Transformed, WithMaterial)
 from .resources import resource_dir
 from .stdlib import COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
 
@@ -923,6 +923,9 @@ BLOCK_KEYS = {
                          _P("radius", "num", None, ">0")), Glow()),
     "block:fog": (_keys(_P("color", "vec3", None, ">=0"), _P("density", "num", None, ">=0")), Fog()),
     "block:slice": (_keys(_P("normal", "vec3", None, "nonzero"), _P("offset", "num")), Slice()),
+    "block:environment": (_keys(_P("zenith", "vec3", None, ">=0"), _P("horizon", "vec3", None, ">=0"),
+                                _P("ground", "vec3", None, ">=0"), _P("intensity", "num", None, ">=0")),
+                          Environment()),
 }
 RENDER_KEYS = _keys(
     _P("width", "int", None, ">=1", "<=65536"), _P("height", "int", None, ">=1", "<=65536"),
@@ -935,7 +938,9 @@ RENDER_KEYS = _keys(
     _P("overrelax", "num", None, "1..1.99"),
     _P("epsilon_scale", "num", None, ">0", f"<={MAX_EPSILON_SCALE:g}"),
     _P("normals", "word:tetrahedral|central"), _P("fast_math", "word:auto|on|off"),
-    _P("exposure", "num", None, "-20..20"), _P("tonemap", "word:none|reinhard|aces"))
+    _P("exposure", "num", None, "-20..20"), _P("tonemap", "word:none|reinhard|aces"),
+    _P("integrator", "word:direct|path"), _P("bounces", "int", None, "1..64"),
+    _P("environment", "block:environment"))
 
 
 # `fractal(formula, ...)`: the shape of a formula (docs/formulas.md). The

@@ -14,7 +14,7 @@ import dataclasses
 import re
 from dataclasses import dataclass
 
-from . import __version__, ir
+from . import __version__, ir, pathtrace
 from .lower import POINT, SceneIR
 from .schedule import ForBlock, Hoist, IfBlock, schedule, varying
 from .passes import PASSES, channels
@@ -474,6 +474,7 @@ def features(scene_ir: SceneIR) -> dict[str, bool]:
         # the passes asked for beyond the default channels (run.PASSES)
         **{f"PASS_{name.upper()}": name in render.aovs for name in PASSES},
         "SHADING_PASSES": bool({"diffuse", "specular", "shadow", "ao"} & set(render.aovs)),
+        "PATH_TRACE": render.integrator == "path",
     }
 
 
@@ -672,6 +673,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         f"    return {normal_method}(p, h, params);\n}}",
         shade,
         resolve_features(lib.template, on),
+        pathtrace.source(scene, literal) if on["PATH_TRACE"] else "",
     ]
     source = "\n\n".join(p.strip("\n") for p in parts if p) + "\n"
     return double_literals(source) if target.double else source

@@ -141,7 +141,6 @@ class Camera:
     eye_separation: float = 0.065    # distance between the eyes of a stereo camera
 
 
-
 @dataclass(frozen=True)
 class Light:
     kind: str                   # directional | point
@@ -175,6 +174,17 @@ class Slice:
 
 
 @dataclass(frozen=True)
+class Environment:
+    """The path tracer's sky: radiance `horizon` at the horizon, blending
+    linearly with the height of the direction to `zenith` straight up and
+    `ground` straight down, times `intensity`."""
+    zenith: Vector3 = (0.35, 0.5, 0.9)
+    horizon: Vector3 = (0.9, 0.9, 0.95)
+    ground: Vector3 = (0.3, 0.27, 0.25)
+    intensity: float = 1.0
+
+
+@dataclass(frozen=True)
 class RenderSettings:
     width: int = 640
     height: int = 480
@@ -197,6 +207,9 @@ class RenderSettings:
     fast_math: str = "auto"          # on: native_ transcendental functions; auto: on CPUs
     exposure: float = 0.0            # stops: PNG colour times 2^exposure (EXR stays as rendered)
     tonemap: str = "none"            # PNG tone curve: none (clip) | reinhard | aces
+    integrator: str = "direct"       # direct: Blinn-Phong and the effects; path: Monte Carlo path tracing
+    bounces: int = 4                 # path: the most surface scatterings of a path
+    environment: Environment | None = None   # path: the sky; None: the background everywhere
     aovs: tuple[str, ...] = ()       # passes beyond the default channels (run.PASSES); not a file key
 
 

@@ -432,6 +432,12 @@ vec3 glow_color(march_result m) {
 }
 #endif
 
+#if FEATURE_PATH_TRACE
+// The path tracer's colour of one sample (stdlib_cl/pathtrace.cl, after this file).
+vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel_angle, lane_uint key,
+                __constant scalar *params);
+#endif
+
 // Colour seen along one ray: the shaded surface or the background, then
 // transparency, reflections, fog and glow.
 vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel_angle,
@@ -507,6 +513,9 @@ __kernel void render(__global float *out, __constant scalar *params,
 #else
     bool pinhole = samples == 1;
 #endif
+#if FEATURE_PATH_TRACE
+    pinhole = false;        // every sample traces a path of its own
+#endif
     if (pinhole) {
         color = trace_color(origin, dir, centre, normal, pixel_angle, params);
         coverage = SELECT((real)0.0f, (real)1.0f, centre.hit);
@@ -533,7 +542,11 @@ __kernel void render(__global float *out, __constant scalar *params,
 #endif
             march_result m = march(sample_origin, sample_dir, inside & sample_seen, pixel_angle, jitter, params);
             vec3 sample_normal = hit_normal(sample_origin, sample_dir, m, pixel_angle, params);
+#if FEATURE_PATH_TRACE
+            color = v3_add(color, path_color(sample_origin, sample_dir, m, sample_normal, pixel_angle, key, params));
+#else
             color = v3_add(color, trace_color(sample_origin, sample_dir, m, sample_normal, pixel_angle, params));
+#endif
             coverage = coverage + SELECT((real)0.0f, (real)1.0f, m.hit);
         }
         color = v3_scale(color, (real)(1.0f / (scalar)samples));

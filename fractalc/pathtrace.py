@@ -1,0 +1,101 @@
+"""The path tracer's part of a kernel (render key `integrator: path`,
+docs/looks.md#path-tracing): its constants (bounces, the environment, the
+lights as a table) and the library file stdlib_cl/pathtrace.cl, which the
+emitter places after the template."""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+from .program import CheckedScene
+from .resources import resource_dir
+
+LIGHT_KINDS = {"directional": 0, "point": 1}
+HEADLIGHT = 2          # no lights in the scene: a light at the eye
+MAX_IRRADIANCE = 1e20  # light values stay within float's range
+
+
+def _light_row(kind: int, vector, color, intensity: float, shadows: bool) -> list[float]:
+    """kind, the direction toward the light or its position, irradiance
+    (pi colour intensity: a white diffuse surface facing the light shows
+    colour intensity, as in the direct renderer), whether it casts shadows."""
+    irradiance = [min(math.pi * c * intensity, MAX_IRRADIANCE) for c in color]
+    return [float(kind), *vector, *irradiance, 1.0 if shadows else 0.0]
+
+
+def lights_table(scene: CheckedScene) -> list[list[float]]:
+    rows = []
+    for light in scene.lights:
+        vector = light.vector
+        if light.kind == "directional":   # the file gives the direction light travels
+            length = math.sqrt(sum(c * c for c in vector))
+            vector = tuple(-c / length for c in vector)
+        rows.append(_light_row(LIGHT_KINDS[light.kind], vector, light.color, light.intensity,
+                               light.shadows != "none"))
+    if not rows and scene.render.environment is None:   # nothing lights the scene: a headlight
+        rows.append(_light_row(HEADLIGHT, (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 1.0, True))
+    return rows
+
+
+def source(scene: CheckedScene, literal) -> str:
+    """The path tracer's constants and functions for `scene`, numbers
+    written by `literal` (the emitter's float literals)."""
+    render = scene.render
+    environment = render.environment
+    if environment is None:     # the background, everywhere
+        colour = (0.0, 0.0, 0.0) if render.background == "transparent" else render.background
+        sky = {"ZENITH": colour, "HORIZON": colour, "GROUND": colour}
+    else:
+        sky = {"ZENITH": environment.zenith, "HORIZON": environment.horizon, "GROUND": environment.ground}
+    rows = lights_table(scene)
+    constants = [f"#define BOUNCES {render.bounces}",
+                 f"#define CAMERA_SEES_ENVIRONMENT {int(render.background != 'transparent')}",
+                 *(f"#define ENVIRONMENT_{part}_{c} {literal(v * (environment.intensity if environment else 1.0))}"
+                   for part, colour in sky.items() for c, v in zip("RGB", colour)),
+                 f"#define LIGHT_COUNT {len(rows)}",
+                 "__constant scalar LIGHTS[] = {",      # never empty (C has no empty arrays)
+                 *(f"    {', '.join(literal(v) for v in row)}," for row in rows or [[0.0] * 8]),
+                 "};"]
+    text = (resource_dir("stdlib_cl") / "pathtrace.cl").read_text()
+    return "\n".join(constants) + "\n\n" + text
+
+
+# Samples per pass: the path tracer renders the image this many samples at
+# a time and averages the passes, so that progress shows per pass and no
+# launch runs long (GPU watchdogs).
+PASS_SAMPLES = 16
+
+
+def _pass_seed(seed: int, index: int) -> int:
+    """A seed per pass, mixed from the image's (a 32-bit hash, so that
+    nearby seeds share no pass)."""
+    x = (seed * 0x9E3779B1 + index * 0x85EBCA77 + 0x165667B1) & 0xFFFFFFFF
+    for shift, factor in ((15, 0x2C1B3C6D), (12, 0x297A2D39)):
+        x ^= x >> shift
+        x = (x * factor) & 0xFFFFFFFF
+    return x ^ (x >> 15)
+
+
+def pass_frames(frame):
+    """`frame` (a run.Frame) as passes of at most PASS_SAMPLES samples,
+    each with its own seed."""
+    whole, rest = divmod(frame.samples, PASS_SAMPLES)
+    counts = [PASS_SAMPLES] * whole + ([rest] if rest else [])
+    return [replace(frame, samples=count, seed=_pass_seed(frame.seed, index)) for index, count in enumerate(counts)]
+
+
+def render_passes(render_frame, frame):
+    """The pixels of `frame` as the mean of its passes' colour and coverage,
+    each weighted by its samples; the other channels (depth, normals,
+    passes: the pixel-centre ray's) are the first pass's.
+    `render_frame(frame)` renders one pass into a new array."""
+    total = None
+    for part in pass_frames(frame):
+        pixels = render_frame(part)
+        if total is None:
+            total = pixels
+            total[..., :4] *= part.samples
+        else:
+            total[..., :4] += pixels[..., :4] * part.samples
+    total[..., :4] /= frame.samples
+    return total

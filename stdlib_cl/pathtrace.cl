@@ -1,0 +1,172 @@
+// Monte Carlo path tracing (render key `integrator: path`; docs/looks.md).
+// Spliced after the template by the emitter (fractalc/pathtrace.py), only
+// into kernels of scenes that use it; the template calls `path_color` for
+// every sample. Above this file, fractalc/pathtrace.py defines:
+//   BOUNCES                 the most surface scatterings of a path
+//   ENVIRONMENT_ZENITH_R .. ENVIRONMENT_GROUND_B   the sky's radiance
+//   CAMERA_SEES_ENVIRONMENT 1, or 0 with a transparent background
+//   LIGHT_COUNT, LIGHTS[]   per light: kind (0 directional, 1 point, 2 the
+//                           headlight), its direction toward the light or
+//                           its position, irradiance (pi colour intensity:
+//                           a white diffuse surface facing it shows colour
+//                           intensity, as in the direct renderer), shadows
+// Paths scatter off surfaces in a loop (no recursion): at each hit, light
+// from every light by next-event estimation (shadow rays), then one new
+// direction sampled from the surface's lobes; the environment is reached by
+// those directions only (the lights are points and directions, which no
+// sampled direction finds, so nothing is counted twice).
+
+#define LIGHT_STRIDE 8
+#define INV_PI 0.3183098861837907f
+#define ROULETTE_AFTER 2        // bounces before Russian roulette may end a path
+#define SMALLEST_ROUGHNESS 0.02f
+
+// A uniform number in [0, 1) for this sample's `dimension` (every random
+// decision of a path has its own).
+real sample_random(lane_uint key, uint dimension) {
+    return unit_random(hash_lanes(key + dimension * 0x9e3779b9u));
+}
+
+// The sky: horizon colour at the horizon, blending linearly in the height
+// of the direction (z is up) to the zenith above and the ground below.
+vec3 environment(vec3 dir) {
+    real above = max(dir.z, 0.0f), below = max(-dir.z, 0.0f);
+    vec3 horizon = v3(ENVIRONMENT_HORIZON_R, ENVIRONMENT_HORIZON_G, ENVIRONMENT_HORIZON_B);
+    vec3 zenith = v3(ENVIRONMENT_ZENITH_R, ENVIRONMENT_ZENITH_G, ENVIRONMENT_ZENITH_B);
+    vec3 ground = v3(ENVIRONMENT_GROUND_R, ENVIRONMENT_GROUND_G, ENVIRONMENT_GROUND_B);
+    return v3_add(horizon, v3_add(v3_scale(v3_sub(zenith, horizon), above), v3_scale(v3_sub(ground, horizon), below)));
+}
+
+// `v` (x, y along two tangents, z along n) in world space: the tangents of
+// Duff et al. 2017 ("Building an orthonormal basis, revisited").
+vec3 around_normal(vec3 n, vec3 v) {
+    real side = SELECT((real)-1.0f, (real)1.0f, n.z >= 0.0f);
+    real a = -1.0f / (side + n.z);
+    real b = n.x * n.y * a;
+    vec3 t1 = v3(1.0f + side * n.x * n.x * a, side * b, -side * n.x);
+    vec3 t2 = v3(b, side + n.y * n.y * a, -n.y);
+    return v3_add(v3_add(v3_scale(t1, v.x), v3_scale(t2, v.y)), v3_scale(n, v.z));
+}
+
+// Smith's masking of GGX for one direction at cosine c to the normal.
+real smith_ggx(real c, real alpha) {
+    real a2 = alpha * alpha;
+    return 2.0f * c / (c + sqrt(a2 + (1.0f - a2) * c * c));
+}
+
+// The GGX (Trowbridge-Reitz) microfacet reflection, white (no Fresnel: the
+// direct renderer's highlight is white too), for n.l, n.v > 0.
+real ggx_brdf(vec3 n, vec3 to_light, vec3 to_eye, real alpha) {
+    vec3 h = v3_normalize(v3_add(to_light, to_eye));
+    real nh = max(v3_dot(n, h), 0.0f), nl = v3_dot(n, to_light), nv = v3_dot(n, to_eye);
+    real a2 = alpha * alpha;
+    real denominator = nh * nh * (a2 - 1.0f) + 1.0f;
+    real distribution = a2 * INV_PI / (denominator * denominator);
+    return distribution * smith_ggx(nl, alpha) * smith_ggx(nv, alpha) / (4.0f * nl * nv);
+}
+
+// Light arriving at p from every light, reflected toward the eye:
+// next-event estimation with a shadow ray per light that casts shadows.
+vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albedo, real diffuse_weight,
+                  real glossy_weight, real alpha, mask active, scalar pixel_angle, __constant scalar *params) {
+    vec3 total = v3((real)0.0f, 0.0f, 0.0f);
+    for (int i = 0; i < LIGHT_COUNT; i++) {
+        __constant scalar *light = LIGHTS + i * LIGHT_STRIDE;
+        vec3 vector = v3(light[1], light[2], light[3]);
+        vec3 to_light = vector;
+        real reach = (real)MAX_DISTANCE, falloff = 1.0f;
+        if (light[0] != 0.0f) {
+            vec3 offset = v3_sub(light[0] == 1.0f ? vector : eye, p);
+            reach = v3_length(offset);
+            to_light = v3_scale(offset, 1.0f / max(reach, (real)1e-30f));
+            if (light[0] == 1.0f)
+                falloff = fmin(1.0f / (reach * reach), 1e8f);
+        }
+        real cosine = v3_dot(n, to_light);
+        mask lit = active & (cosine > 0.0f);
+        if (!ANY(lit))
+            continue;
+        if (light[7] != 0.0f) {
+            march_result blocker = march(lifted, to_light, lit, pixel_angle, 0.0f, params);
+            lit = lit & !(blocker.hit & (blocker.t < reach));
+        }
+        real glossy = SELECT((real)0.0f, ggx_brdf(n, to_light, to_eye, alpha), v3_dot(n, to_eye) > 0.0f);
+        // irradiance E times the BRDF (albedo / pi diffuse, plus the glossy lobe) times the cosine
+        vec3 reflected = v3_add(v3_scale(albedo, diffuse_weight * INV_PI), v3((real)(glossy_weight * glossy),
+                                glossy_weight * glossy, glossy_weight * glossy));
+        real strength = SELECT((real)0.0f, cosine * falloff, lit);
+        total = v3_add(total, v3_mul(reflected, v3_scale(v3(light[4], light[5], light[6]), strength)));
+    }
+    return total;
+}
+
+// The radiance one camera sample brings back along `dir` from `origin`,
+// whose march `m` hit where `normal` says (or missed).
+vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel_angle, lane_uint key,
+                __constant scalar *params) {
+    vec3 eye = origin;
+    vec3 radiance = v3_scale(environment(dir), SELECT((real)CAMERA_SEES_ENVIRONMENT, (real)0.0f, m.hit));
+    vec3 throughput = v3((real)1.0f, 1.0f, 1.0f);
+    mask active = m.hit;
+    real travelled = 0.0f;
+    for (int bounce = 0; bounce < BOUNCES && ANY(active); bounce++) {
+        travelled = travelled + m.t;
+        vec3 p = v3_add(origin, v3_scale(dir, m.t));
+        surface s = surface_at(p, params);
+        vec3 albedo = v3(s.red, s.green, s.blue);
+        vec3 to_eye = v3_scale(dir, -1.0f);
+        // the distance's gradient, outward (not turned toward the ray: a
+        // grazing ray stops short of the surface, where it may face away)
+        vec3 n = normal;
+        // the material's lobes: mirror (reflectivity), glossy GGX (specular,
+        // roughness from shininess as for Blinn-Phong), diffuse (the rest)
+        real mirror_weight = clamp(s.reflectivity, 0.0f, 1.0f);
+        real glossy_weight = (1.0f - mirror_weight) * clamp(s.specular, 0.0f, 1.0f);
+        real diffuse_weight = 1.0f - mirror_weight - glossy_weight;
+        real alpha = max(sqrt(2.0f / (s.shininess + 2.0f)), SMALLEST_ROUGHNESS);
+        vec3 lifted = v3_add(p, v3_scale(n, 2.0f * hit_threshold(travelled, pixel_angle)));
+        radiance = v3_add(radiance, v3_mul(throughput, direct_light(p, lifted, n, to_eye, eye, albedo, diffuse_weight,
+                                                                     glossy_weight, alpha, active, pixel_angle, params)));
+        // one lobe, chosen by its weight, samples the next direction; the
+        // throughput takes the lobe's f cos / pdf (its weight cancels)
+        uint first = (uint)bounce * 4u + 1u;
+        real choice = sample_random(key, first), u = sample_random(key, first + 1u);
+        real angle = 6.283185307179586f * sample_random(key, first + 2u);
+        mask diffuse = choice < diffuse_weight;
+        mask glossy = !diffuse & (choice < diffuse_weight + glossy_weight);
+        // diffuse: cosine-weighted about n; f cos / pdf = albedo
+        real radius = sqrt(u);
+        vec3 scattered = around_normal(n, v3(radius * cos(angle), radius * sin(angle), sqrt(max(1.0f - u, 0.0f))));
+        vec3 weight = albedo;
+        // glossy: the half vector from GGX's D(h) cos; f cos / pdf = G (v.h) / (n.v n.h)
+        real tan2 = alpha * alpha * u / max(1.0f - u, (real)1e-7f);
+        real cos_h = rsqrt(1.0f + tan2), sin_h = sqrt(max(1.0f - cos_h * cos_h, 0.0f));
+        vec3 h = v3_select(n, around_normal(n, v3(sin_h * cos(angle), sin_h * sin(angle), cos_h)), glossy);
+        real vh = v3_dot(to_eye, h);
+        vec3 reflected = v3_sub(v3_scale(h, 2.0f * vh), to_eye);   // the mirror lobe: h = n
+        real nv = max(v3_dot(n, to_eye), 1e-6f), nl = v3_dot(n, reflected);
+        real glossy_weight_now = smith_ggx(nv, alpha) * smith_ggx(max(nl, 0.0f), alpha) * vh
+                                 / (nv * max(v3_dot(n, h), 1e-6f));
+        real specular_weight = SELECT(SELECT((real)0.0f, (real)1.0f, nl > 0.0f), glossy_weight_now, glossy);
+        scattered = v3_select(reflected, scattered, diffuse);
+        weight = v3_select(v3(specular_weight, specular_weight, specular_weight), weight, diffuse);
+        throughput = v3_mul(throughput, weight);
+        // Russian roulette: a dim path goes on with the probability of its
+        // brightness, and if it does, counts for the ones that stopped
+        if (bounce >= ROULETTE_AFTER) {
+            real going_on = clamp(max(throughput.x, max(throughput.y, throughput.z)), 0.0f, 0.95f);
+            active = active & (sample_random(key, first + 3u) < going_on);
+            throughput = v3_scale(throughput, 1.0f / max(going_on, (real)1e-6f));
+        }
+        active = active & (max(throughput.x, max(throughput.y, throughput.z)) > 0.0f);
+        m = march(lifted, scattered, active, pixel_angle, 0.0f, params);
+        mask escaped = active & !m.hit;
+        radiance = v3_add(radiance, v3_mul(throughput, v3_scale(environment(scattered),
+                                                                SELECT((real)0.0f, (real)1.0f, escaped))));
+        active = active & m.hit;
+        normal = hit_normal(lifted, scattered, m, pixel_angle, params);
+        origin = lifted;
+        dir = scattered;
+    }
+    return radiance;
+}

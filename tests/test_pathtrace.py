@@ -1,0 +1,172 @@
+"""The path tracer (`integrator: path`, docs/looks.md#path-tracing): the
+white furnace, sky light against quadrature, direct light against its
+formula, shadows, seeded determinism and the 1/sqrt(samples) convergence.
+Renders are 16 x 12 to 32 x 24, with few samples except the convergence
+reference (4096 samples of 16 x 12, about 0.3 s here)."""
+
+import math
+
+import numpy as np
+import pytest
+
+import fractalc
+
+UNIFORM = "environment: { zenith: (1, 1, 1), horizon: (1, 1, 1), ground: (1, 1, 1) }"
+DARK = "environment: { zenith: (0, 0, 0), horizon: (0, 0, 0), ground: (0, 0, 0) }"
+
+
+def furnace(albedo: float, **build):
+    return fractalc.loads(f"""
+    material m {{ color: ({albedo}, {albedo}, {albedo}), specular: 0 }}
+    scene sphere(1).material(m)
+    camera {{ position: (0, -4, 0.5), target: (0, 0, 0), fov: 40 }}
+    render {{ width: 32, height: 24, integrator: path, bounces: 4, {UNIFORM} }}
+    """, **build)
+
+
+@pytest.mark.parametrize("build", [{}, {"lanes": 1}, {"precision": "double"}])
+def test_white_furnace(build):
+    # a convex diffuse sphere in radiance 1: each path scatters once and
+    # escapes, so every sample of a covered pixel is exactly the albedo
+    # (zero Monte Carlo error) and an albedo-1 sphere vanishes
+    half = furnace(0.5, **build).render(samples=8)
+    covered = half.rgba[..., 3] == 1
+    assert covered.sum() > 150
+    assert np.abs(half.rgba[..., :3][covered] - 0.5).max() < 1e-4
+    assert np.abs(half.rgba[..., :3][half.rgba[..., 3] == 0] - 1).max() < 1e-6, "misses see the environment"
+    white = furnace(1.0, **build).render(samples=8)
+    assert (white.rgba[..., 3] == 1).sum() > 150
+    assert np.abs(white.rgba[..., :3] - 1).max() < 1e-4, "the albedo-1 sphere vanishes, edges too"
+
+
+def sky_irradiance(normals, zenith, horizon, ground):
+    """Irradiance from the sky at each normal, by quadrature over 40000
+    directions (a Fibonacci sphere): the integral of L(w) max(n.w, 0)."""
+    count = 40000
+    k = np.arange(count) + 0.5
+    z = 1 - 2 * k / count
+    angle = math.pi * (1 + 5 ** 0.5) * k
+    w = np.stack([np.sqrt(1 - z * z) * np.cos(angle), np.sqrt(1 - z * z) * np.sin(angle), z], axis=-1)
+    radiance = (np.asarray(horizon) + np.outer(np.maximum(z, 0), np.subtract(zenith, horizon))
+                + np.outer(np.maximum(-z, 0), np.subtract(ground, horizon)))
+    cosines = np.maximum(normals @ w.T, 0)
+    return cosines @ radiance * (4 * math.pi / count)
+
+
+def test_sky_light_on_a_diffuse_sphere_matches_quadrature():
+    sky = {"zenith": (0.2, 0.4, 1.0), "horizon": (0.9, 0.8, 0.7), "ground": (0.1, 0.3, 0.05)}
+    text = f"""
+    material m {{ color: (0.7, 0.7, 0.7), specular: 0 }}
+    scene sphere(1).material(m)
+    camera {{ position: (0, -4, 1.5), target: (0, 0, 0), fov: 35 }}
+    render {{ width: 32, height: 24, integrator: path, dither: 0, epsilon: 1e-5,
+              environment: {{ {", ".join(f"{k}: {v}" for k, v in sky.items())} }} }}
+    """
+    image = fractalc.loads(text).render(samples=256)
+    covered = image.rgba[..., 3] == 1
+    expected = 0.7 / math.pi * sky_irradiance(image.normal[covered].astype(float), **sky)
+    residual = image.rgba[..., :3][covered] - expected
+    # each pixel within 4 of its samples' standard errors (0.03 at most
+    # here); the mean over 300 pixels within 3 of its own
+    assert np.abs(residual).max() < 0.03 * 4 / 1.5
+    assert np.abs(residual.mean(axis=0)).max() < 3 * residual.std() / math.sqrt(covered.sum()) + 1e-3
+    # the ground's colour shows from below, the zenith's from above
+    assert expected[:, 2].max() > expected[:, 1].max()
+
+
+PLANE = f"""
+material floor {{ color: (0.6, 0.6, 0.6), specular: 0 }}
+scene plane().material(floor)
+camera {{ position: (0, -3, 2), target: (0, 0, 0), fov: 50 }}
+render {{ width: 24, height: 16, integrator: path, bounces: 1, epsilon: 1e-5, {DARK} }}
+"""
+
+
+def test_a_directional_light_on_a_diffuse_plane_is_albedo_times_intensity_times_cosine():
+    scene = fractalc.loads(PLANE + "light directional { direction: (1, 0.5, -2), intensity: 1.5 }")
+    rgb = scene.render(samples=4).rgba[..., :3]
+    cosine = 2 / math.sqrt(1 + 0.25 + 4)
+    assert np.abs(rgb - 0.6 * 1.5 * cosine).max() < 1e-4     # the same as the direct renderer's diffuse term
+
+
+def test_a_point_light_falls_off_with_the_square_of_the_distance():
+    scene = fractalc.loads(PLANE + "light point { position: (0.5, 0.5, 1.2), intensity: 3, color: (1, 0.5, 0.2) }")
+    image = scene.render(samples=16, aovs=["P"])
+    p = image.passes["P"].astype(float)
+    offset = np.array([0.5, 0.5, 1.2]) - p
+    distance = np.linalg.norm(offset, axis=-1)
+    expected = 0.6 * 3 * (offset[..., 2] / distance) / distance ** 2
+    # the pixel's mean against its centre's value: within 2 % where the
+    # floor is near (the pixel spans a small part of the falloff)
+    near = image.depth < 3.5
+    assert near.sum() > 150
+    np.testing.assert_allclose(image.rgba[..., 0][near], expected[near], rtol=0.02)
+    np.testing.assert_allclose(image.rgba[..., 2] / image.rgba[..., 0], 0.2, rtol=1e-4)
+
+
+def test_shadows_block_exactly_the_light_the_occluder_covers():
+    scene = fractalc.loads(PLANE.replace("scene plane()", "scene sphere(0.7).translate((0, 0, 1.2)) | plane()")
+                           + "light directional { direction: (0.5, 0, -1) }")
+    image = scene.render(samples=4, aovs=["P"], width=48, height=32)
+    p = image.passes["P"].astype(float)
+    floor = np.abs(p[..., 2]) < 1e-3
+    # pixels all of whose samples see the floor: not beside the sphere
+    floor = floor & np.all([np.roll(floor, shift, axis) for shift in (-1, 1) for axis in (0, 1)], axis=0)
+    to_light = -np.array([0.5, 0, -1]) / math.sqrt(1.25)
+    centre = np.array([0, 0, 1.2])
+    along = (centre - p) @ to_light
+    miss = np.linalg.norm(centre - p - along[..., None] * to_light, axis=-1) - 0.7
+    # margins of a few pixel footprints on the floor
+    shadowed, lit = floor & (miss < -0.15) & (along > 0), floor & (miss > 0.15)
+    assert shadowed.sum() > 10 and lit.sum() > 100
+    assert np.all(image.rgba[..., 0][shadowed] == 0)
+    assert np.abs(image.rgba[..., 0][lit] - 0.6 * (1 / math.sqrt(1.25))).max() < 1e-4
+
+
+SCENE = """
+material m { color: (0.8, 0.6, 0.4), specular: 0.3, shininess: 20 }
+material floor { color: (0.7, 0.7, 0.7), specular: 0 }
+material mirror { color: (1, 1, 1), reflectivity: 0.8 }
+scene sphere(1).material(m) | sphere(0.4).translate((1.3, 0, -0.6)).material(mirror) | plane(offset: -1).material(floor)
+camera { position: (0, -4, 1), target: (0, 0, 0), fov: 50 }
+light directional { direction: (-1, 1, -2), intensity: 1 }
+render { width: 16, height: 12, integrator: path, bounces: 4,
+         environment: { zenith: (0.3, 0.45, 0.9), horizon: (0.6, 0.6, 0.65), ground: (0.2, 0.2, 0.2) } }
+"""
+
+
+def test_the_same_seed_gives_the_same_image():
+    scene = fractalc.loads(SCENE)
+    first, again = scene.render(samples=24, seed=7).rgba, scene.render(samples=24, seed=7).rgba
+    assert np.array_equal(first, again)
+    other = scene.render(samples=24, seed=8).rgba
+    assert np.abs(first - other).max() > 0.01
+
+
+def test_rmse_falls_as_one_over_the_square_root_of_the_samples():
+    scene = fractalc.loads(SCENE)
+    reference = scene.render(samples=4096, seed=1000).rgba[..., :3]
+    counts = np.array([16, 64, 256, 1024])
+    errors = np.array([np.mean([np.sqrt(((scene.render(samples=n, seed=s).rgba[..., :3] - reference) ** 2).mean())
+                                for s in range(4)]) for n in counts])
+    # the reference's own error (1/64 of one sample's variance) taken out
+    own = errors[-1] / math.sqrt(1024 / 4096 + 1) * math.sqrt(1024 / 4096)
+    slope = np.polyfit(np.log(counts), np.log(np.sqrt(np.maximum(errors ** 2 - own ** 2, 1e-12))), 1)[0]
+    assert -0.6 < slope < -0.4, (errors, slope)
+    assert np.all(np.diff(errors) < 0)
+
+
+def test_pass_frames_split_the_samples_with_a_seed_each():
+    from fractalc import pathtrace, run
+    frame = run.Frame(16, 12, 40, 5, ())
+    passes = pathtrace.pass_frames(frame)
+    assert [p.samples for p in passes] == [16, 16, 8]
+    assert len({p.seed for p in passes}) == 3
+    assert [p.seed for p in pathtrace.pass_frames(run.Frame(16, 12, 40, 6, ()))] != [p.seed for p in passes]
+
+
+def test_the_direct_renderer_stays_the_default_and_has_no_path_tracer():
+    scene = fractalc.loads(SCENE.replace("integrator: path, ", ""))
+    assert scene.checked.render.integrator == "direct"
+    assert "path_color" not in scene.kernel_source()
+    assert "path_color" in fractalc.loads(SCENE).kernel_source()
