@@ -170,3 +170,22 @@ def test_the_direct_renderer_stays_the_default_and_has_no_path_tracer():
     assert scene.checked.render.integrator == "direct"
     assert "path_color" not in scene.kernel_source()
     assert "path_color" in fractalc.loads(SCENE).kernel_source()
+
+
+def test_the_viewer_keeps_refining_a_still_path_traced_view(tmp_path, monkeypatch):
+    import io
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    pytest.importorskip("pygame")
+    from fractalc.view import Viewer
+    path = tmp_path / "scene.frac"
+    path.write_text(SCENE)
+    viewer = Viewer(str(path), output_dir=str(tmp_path), out=io.StringIO(), err=io.StringIO(), max_samples=64)
+    viewer.step(0.05)                     # a preview, then the pinhole image
+    viewer.step(0.05)
+    reference = viewer.scene.render(camera=viewer.camera, samples=2048, seed=999).rgba[..., :3]
+    errors = {}
+    while viewer.step(0.05):
+        if viewer.samples in (8, 64):
+            errors[viewer.samples] = np.sqrt(((viewer.linear - reference) ** 2).mean())
+    assert viewer.samples == 64
+    assert errors[64] < 0.5 * errors[8], errors      # 1/sqrt(8) would be 0.35
