@@ -793,13 +793,15 @@ class _Checker:
     def light(self, decl: ast.LightDecl) -> Light | None:
         keys = LIGHT_KEYS.get(decl.kind)
         if keys is None:
-            self.error(decl.kind_span, f"unknown light kind '{decl.kind}' (known: directional, point)")
+            self.error(decl.kind_span, f"unknown light kind '{decl.kind}' (known: {', '.join(LIGHT_KEYS)})")
             return None
         found = self.entries(decl.block, keys, "light")
         vector_key = "direction" if decl.kind == "directional" else "position"
-        if vector_key not in found:
-            if not any(e.key == vector_key for e in decl.block.entries):
-                self.error(decl.span, f"a {decl.kind} light needs '{vector_key}'")
+        needed = (vector_key, "direction") if decl.kind == "spot" else (vector_key,)
+        if any(key not in found for key in needed):
+            for key in needed:
+                if not any(e.key == key for e in decl.block.entries):
+                    self.error(decl.span, f"a {decl.kind} light needs '{key}'")
             return None
         vector = found.pop(vector_key)
         return Light(decl.kind, vector, **found)
@@ -917,7 +919,9 @@ CAMERA_KEYS = _keys(_P("position", "vec3"), _P("target", "vec3"), _P("up", "vec3
 _LIGHT_COMMON = (_P("color", "vec3", None, ">=0"), _P("intensity", "num", None, ">=0"),
                  _P("shadows", "word:none|hard|soft"), _P("softness", "num", None, ">0"))
 LIGHT_KEYS = {"directional": _keys(_P("direction", "vec3", None, "nonzero"), *_LIGHT_COMMON),
-              "point": _keys(_P("position", "vec3"), *_LIGHT_COMMON)}
+              "point": _keys(_P("position", "vec3"), *_LIGHT_COMMON),
+              "spot": _keys(_P("position", "vec3"), _P("direction", "vec3", None, "nonzero"), *_LIGHT_COMMON,
+                            _P("angle", "num", None, ">0", "<180"), _P("falloff", "num", None, ">=0", "<=180"))}
 BLOCK_KEYS = {
     "block:glow": (_keys(_P("color", "vec3", None, ">=0"), _P("strength", "num", None, ">=0"),
                          _P("radius", "num", None, ">0")), Glow()),

@@ -344,6 +344,8 @@ def _light_block(index: int, light: Light, bound, transparent: bool, passes: boo
                   "        vec3 to_light = v3_scale(offset, 1.0f / reach);",
                   f"        vec3 radiance = v3_scale({radiance}, "
                   f"fmin(1.0f / (reach * reach), {literal(MAX_INVERSE_SQUARE)}));"]
+    if light.kind == "spot":
+        lines += _spot_lines(light, "radiance", "to_light", "        ")
     needs = set()
     if bound is not None and light.shadows != "none":
         # past the scene's bounding sphere nothing can block the light, nor
@@ -379,6 +381,17 @@ def _light_block(index: int, light: Light, bound, transparent: bool, passes: boo
         lines.append("        passes->shadow = passes->shadow + (1.0f - visible);")
     lines.append("    }")
     return "\n".join(lines), needs
+
+
+def _spot_lines(light: Light, radiance: str, to_light: str, indent: str) -> list[str]:
+    """A spot light's cone: `radiance` times smoothstep from the cone's
+    outer cosine to its inner one, of the angle between the light's axis
+    and the way the light goes to the point (docs/looks.md#spot-lights)."""
+    length = sum(c * c for c in light.direction) ** 0.5
+    axis = _vector(tuple(c / length for c in light.direction))
+    inner, outer = light.cone_cosines()
+    return [f"{indent}{radiance} = v3_scale({radiance}, smoothstep({literal(outer)}, "
+            f"{literal(max(inner, outer + 1e-6))}, -v3_dot({to_light}, {axis})));"]
 
 
 def _lit_lines(to_light: str, radiance: str, passes: bool, indent: str) -> list[str]:

@@ -10,17 +10,20 @@ from dataclasses import replace
 from .program import CheckedScene
 from .resources import resource_dir
 
-LIGHT_KINDS = {"directional": 0, "point": 1}
+LIGHT_KINDS = {"directional": 0, "point": 1, "spot": 3}
 HEADLIGHT = 2          # no lights in the scene: a light at the eye
+LIGHT_STRIDE = 13      # numbers per light in the kernel's LIGHTS table
 MAX_IRRADIANCE = 1e20  # light values stay within float's range
 
 
-def _light_row(kind: int, vector, color, intensity: float, shadows: bool) -> list[float]:
+def _light_row(kind: int, vector, color, intensity: float, shadows: bool,
+               axis=(0.0, 0.0, -1.0), cone=(-1.0, -1.0)) -> list[float]:
     """kind, the direction toward the light or its position, irradiance
     (pi colour intensity: a white diffuse surface facing the light shows
-    colour intensity, as in the direct renderer), whether it casts shadows."""
+    colour intensity, as in the direct renderer), whether it casts
+    shadows, and a spot's unit axis and cone cosines (outer, inner)."""
     irradiance = [min(math.pi * c * intensity, MAX_IRRADIANCE) for c in color]
-    return [float(kind), *vector, *irradiance, 1.0 if shadows else 0.0]
+    return [float(kind), *vector, *irradiance, 1.0 if shadows else 0.0, *axis, *cone]
 
 
 def lights_table(scene: CheckedScene) -> list[list[float]]:
@@ -30,8 +33,11 @@ def lights_table(scene: CheckedScene) -> list[list[float]]:
         if light.kind == "directional":   # the file gives the direction light travels
             length = math.sqrt(sum(c * c for c in vector))
             vector = tuple(-c / length for c in vector)
+        length = math.sqrt(sum(c * c for c in light.direction))
+        inner, outer = light.cone_cosines()
         rows.append(_light_row(LIGHT_KINDS[light.kind], vector, light.color, light.intensity,
-                               light.shadows != "none"))
+                               light.shadows != "none", tuple(c / length for c in light.direction),
+                               (outer, max(inner, outer + 1e-6))))
     if not rows and scene.render.environment is None:   # nothing lights the scene: a headlight
         rows.append(_light_row(HEADLIGHT, (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 1.0, True))
     return rows
@@ -48,13 +54,13 @@ def source(scene: CheckedScene, literal) -> str:
     else:
         sky = {"ZENITH": environment.zenith, "HORIZON": environment.horizon, "GROUND": environment.ground}
     rows = lights_table(scene)
-    constants = [f"#define BOUNCES {render.bounces}",
+    constants = [f"#define BOUNCES {render.bounces}", f"#define LIGHT_STRIDE {LIGHT_STRIDE}",
                  f"#define CAMERA_SEES_ENVIRONMENT {int(render.background != 'transparent')}",
                  *(f"#define ENVIRONMENT_{part}_{c} {literal(v * (environment.intensity if environment else 1.0))}"
                    for part, colour in sky.items() for c, v in zip("RGB", colour)),
                  f"#define LIGHT_COUNT {len(rows)}",
                  "__constant scalar LIGHTS[] = {",      # never empty (C has no empty arrays)
-                 *(f"    {', '.join(literal(v) for v in row)}," for row in rows or [[0.0] * 8]),
+                 *(f"    {', '.join(literal(v) for v in row)}," for row in rows or [[0.0] * LIGHT_STRIDE]),
                  "};"]
     text = (resource_dir("stdlib_cl") / "pathtrace.cl").read_text()
     return "\n".join(constants) + "\n\n" + text

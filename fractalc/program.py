@@ -4,6 +4,7 @@ later stages read. Numbers that may depend on params are IR expressions
 constants."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Union
 
@@ -143,12 +144,21 @@ class Camera:
 
 @dataclass(frozen=True)
 class Light:
-    kind: str                   # directional | point
+    kind: str                   # directional | point | spot
     vector: Vector3             # direction the light travels, or position
     color: Vector3 = (1.0, 1.0, 1.0)
     intensity: float = 1.0
     shadows: str = "hard"       # none | hard | soft
     softness: float = 16.0
+    direction: Vector3 = (0.0, 0.0, -1.0)   # spot: the cone's axis, the way it points
+    angle: float = 30.0         # spot: full brightness within this angle of the axis, degrees
+    falloff: float = 10.0       # spot: then fading to none over this many degrees more
+
+    def cone_cosines(self) -> tuple[float, float]:
+        """A spot's cosines of the angle where its light starts fading
+        (inner) and where it ends (outer)."""
+        inner = math.radians(self.angle)
+        return math.cos(inner), math.cos(min(inner + math.radians(self.falloff), math.pi))
 
 
 @dataclass(frozen=True)

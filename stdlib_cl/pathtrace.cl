@@ -5,18 +5,19 @@
 //   BOUNCES                 the most surface scatterings of a path
 //   ENVIRONMENT_ZENITH_R .. ENVIRONMENT_GROUND_B   the sky's radiance
 //   CAMERA_SEES_ENVIRONMENT 1, or 0 with a transparent background
-//   LIGHT_COUNT, LIGHTS[]   per light: kind (0 directional, 1 point, 2 the
-//                           headlight), its direction toward the light or
-//                           its position, irradiance (pi colour intensity:
-//                           a white diffuse surface facing it shows colour
-//                           intensity, as in the direct renderer), shadows
+//   LIGHT_COUNT, LIGHTS[]   LIGHT_STRIDE numbers per light: kind (0
+//                           directional, 1 point, 2 the headlight, 3 spot),
+//                           its direction toward the light or its position,
+//                           irradiance (pi colour intensity: a white diffuse
+//                           surface facing it shows colour intensity, as in
+//                           the direct renderer), shadows (1 or 0), a
+//                           spot's axis and its cone's outer and inner cosines
 // Paths scatter off surfaces in a loop (no recursion): at each hit, light
 // from every light by next-event estimation (shadow rays), then one new
 // direction sampled from the surface's lobes; the environment is reached by
 // those directions only (the lights are points and directions, which no
 // sampled direction finds, so nothing is counted twice).
 
-#define LIGHT_STRIDE 8
 #define INV_PI 0.3183098861837907f
 #define ROULETTE_AFTER 2        // bounces before Russian roulette may end a path
 #define SMALLEST_ROUGHNESS 0.02f
@@ -76,11 +77,15 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
         vec3 to_light = vector;
         real reach = (real)MAX_DISTANCE, falloff = 1.0f;
         if (light[0] != 0.0f) {
-            vec3 offset = v3_sub(light[0] == 1.0f ? vector : eye, p);
+            bool headlight = light[0] == 2.0f;
+            vec3 offset = v3_sub(headlight ? eye : vector, p);
             reach = v3_length(offset);
             to_light = v3_scale(offset, 1.0f / max(reach, (real)1e-30f));
-            if (light[0] == 1.0f)
+            if (!headlight)
                 falloff = fmin(1.0f / (reach * reach), 1e8f);
+            if (light[0] == 3.0f)   // a spot's cone: smoothstep across its falloff
+                falloff = falloff * smoothstep(light[11], light[12],
+                                               -v3_dot(to_light, v3(light[8], light[9], light[10])));
         }
         real cosine = v3_dot(n, to_light);
         mask lit = active & (cosine > 0.0f);

@@ -1,6 +1,9 @@
-"""Looks (docs/looks.md): exposure and the tone curve of PNG output. The
+"""Looks (docs/looks.md): exposure and the tone curve of PNG output (the
 background of a scene is a known radiance, so the PNG's value of a missed
-pixel is known exactly. Renders are 16 x 12."""
+pixel is known exactly), and spot lights in both integrators against
+their formula. Renders are 16 x 12 and 48 x 32."""
+
+import math
 
 import numpy as np
 import OpenImageIO as oiio
@@ -82,3 +85,60 @@ def test_every_example_in_the_looks_page_checks():
     assert blocks
     for block in blocks:
         fractalc.loads(block, path="docs/looks.md")
+
+
+SPOT = """
+material floor { color: (0.6, 0.6, 0.6), specular: 0 }
+scene plane().material(floor)
+camera { position: (0, -3, 3), target: (0, 0, 0), fov: 60 }
+light spot { position: (0.2, 0, 2), direction: (0.3, 0, -1), angle: 20, falloff: 15, intensity: 4, color: (1, 0.8, 0.5) }
+render { width: 48, height: 32, epsilon: 1e-5, dither: 0, INTEGRATOR
+         environment: { zenith: (0, 0, 0), horizon: (0, 0, 0), ground: (0, 0, 0) } }
+"""
+
+
+def spot_light_at(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The spot's irradiance factor I cos / d^2 on the floor at points p,
+    and how far into its cone each point is (the cosine to the axis)."""
+    offset = np.array([0.2, 0, 2]) - p
+    distance = np.linalg.norm(offset, axis=-1)
+    axis = np.array([0.3, 0, -1]) / np.linalg.norm([0.3, 0, -1])
+    along = -(offset / distance[..., None]) @ axis
+    return 4 * (offset[..., 2] / distance) / distance ** 2, along
+
+
+def smoothstep(edge0, edge1, x):
+    t = np.clip((x - edge0) / (edge1 - edge0), 0, 1)
+    return t * t * (3 - 2 * t)
+
+
+@pytest.mark.parametrize("build", [{}, {"lanes": 1}, {"precision": "double"}])
+def test_a_spot_light_lights_its_cone_and_fades_across_its_falloff(build):
+    image = fractalc.loads(SPOT.replace("INTEGRATOR", ""), **build).render(aovs=["P"])
+    strength, along = spot_light_at(image.passes["P"].astype(float))
+    cone = smoothstep(math.cos(math.radians(35)), math.cos(math.radians(20)), along)
+    assert (cone == 1).sum() > 50 and (cone == 0).sum() > 50 and ((cone > 0.1) & (cone < 0.9)).sum() > 20
+    # the direct renderer: ambient 0.25 albedo, plus albedo times the light
+    for channel, colour in enumerate((1, 0.8, 0.5)):
+        np.testing.assert_allclose(image.rgba[..., channel], 0.6 * (0.25 + colour * strength * cone),
+                                   rtol=2e-4, atol=1e-6)
+
+
+def test_the_path_tracer_lights_a_spot_s_cone_alike():
+    image = fractalc.loads(SPOT.replace("INTEGRATOR", "integrator: path, bounces: 1,")).render(samples=4, aovs=["P"])
+    strength, along = spot_light_at(image.passes["P"].astype(float))
+    inside, outside = along > math.cos(math.radians(17)), along < math.cos(math.radians(38))
+    np.testing.assert_allclose(image.rgba[..., 0][inside], 0.6 * strength[inside], rtol=0.03)
+    assert np.all(image.rgba[..., :3][outside] == 0)
+
+
+def test_a_spot_light_needs_a_position_and_a_direction():
+    with pytest.raises(fractalc.SceneError) as caught:
+        fractalc.loads("scene sphere()\nlight spot { position: (0, 0, 3), angle: 200 }\n")
+    message = str(caught.value)
+    assert "'angle' of 'light' must be less than 180, not 200" in message
+    with pytest.raises(fractalc.SceneError) as caught:
+        fractalc.loads("scene sphere()\nlight spot { position: (0, 0, 3) }\nlight area { }\n")
+    message = str(caught.value)
+    assert "a spot light needs 'direction'" in message
+    assert "unknown light kind 'area' (known: directional, point, spot)" in message
