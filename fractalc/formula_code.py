@@ -98,10 +98,12 @@ class Formula:
 
     @property
     def carried(self) -> tuple[str, ...]:
-        """The names set by `init` (z among them if it is), in order."""
+        """The names set by `init` that the step or the final lines use
+        (z among them if it is), in order: the loop carries them."""
+        used = _names(self.step + self.final)
         names: list[str] = []
         for s in self.init:
-            if s.name not in names:
+            if s.name not in names and s.name in used:
                 names.append(s.name)
         return tuple(names)
 
@@ -136,24 +138,43 @@ def _nested(statement) -> list:
     return found
 
 
-def _calls(statements, names) -> bool:
-    stack = [s.value for s in statements if isinstance(s, ast.Assign)]
+def _expressions(statements) -> list:
+    """Every expression node of `statements`, ifs' included."""
+    stack = [s for s in statements]
+    found = []
     while stack:
-        e = stack.pop()
+        s = stack.pop()
+        if isinstance(s, ast.If):
+            stack.extend((*s.then, *s.otherwise))
+            found.append(s.condition)
+        else:
+            found.append(s.value)
+    out = []
+    while found:
+        e = found.pop()
+        out.append(e)
         if isinstance(e, ast.Call):
-            if e.name in names:
-                return True
-            stack.extend(a.value for a in e.args)
-        elif isinstance(e, (ast.Binary,)):
-            stack.extend((e.left, e.right))
+            found.extend(a.value for a in e.args)
+        elif isinstance(e, ast.Binary):
+            found.extend((e.left, e.right))
         elif isinstance(e, ast.Unary):
-            stack.append(e.operand)
+            found.append(e.operand)
         elif isinstance(e, ast.Vector):
-            stack.extend(e.items)
+            found.extend(e.items)
         elif isinstance(e, (ast.Field, ast.Method)):
-            stack.append(e.receiver)
-    return False
+            found.append(e.receiver)
+    return out
 
+
+def _names(statements) -> set:
+    """The names `statements` read or set."""
+    assigned = {s.name for s in (*statements, *(n for s in statements for n in _nested(s)))
+                if isinstance(s, ast.Assign)}
+    return assigned | {e.name for e in _expressions(statements) if isinstance(e, ast.Name)}
+
+
+def _calls(statements, names) -> bool:
+    return any(isinstance(e, ast.Call) and e.name in names for e in _expressions(statements))
 
 class Interpreter:
     """Runs statements on an environment of Values (names -> Value).
@@ -179,22 +200,22 @@ class Interpreter:
         if condition.type != "mask":
             raise Mistake(s.condition.span, f"'if' needs a comparison (such as 'r < 1'), this is {_word(condition)}")
         then, otherwise = self.run(s.then, env, readonly), self.run(s.otherwise, env, readonly)
-        merged = dict(env)
-        for name in set(then) | set(otherwise):
+        merged, differ = dict(env), []
+        for name in sorted(set(then) | set(otherwise)):
             if name.startswith("__"):
                 continue
             a, b = then.get(name), otherwise.get(name)
             if a is None or b is None:
                 merged.pop(name, None)
-                merged.setdefault("__one_sided__", {})
-                merged["__one_sided__"] = {**merged["__one_sided__"], name: s.span}
-                continue
-            if a is b:
+                merged["__one_sided__"] = {**merged.get("__one_sided__", {}), name: s.span}
+            elif a is b:
                 merged[name] = a
-                continue
-            if a.type != b.type:
+            elif a.type != b.type:
                 raise Mistake(s.span, f"'{name}' is {_word(a)} after 'if' and {_word(b)} after 'else'")
-            merged[name] = _chosen(condition, a, b)
+            else:
+                differ.append(name)
+        # one branch for all the values the sides set differently
+        merged.update(zip(differ, _chosen(condition, [then[n] for n in differ], [otherwise[n] for n in differ])))
         return merged
 
     # ---- expressions ---------------------------------------------------------
@@ -328,18 +349,24 @@ def _joined(parts: list[Value]) -> Value:
                  next((v.underivable for v in parts if v.underivable), None))
 
 
-def _chosen(condition: Value, a: Value, b: Value) -> Value:
-    """`a` where the condition holds, else `b`, as an IR branch (only the
-    rays that need a side compute it)."""
-    forms = a.form is not None and b.form is not None
-    then = (*a.items, *(a.form if forms else ()))
-    otherwise = (*b.items, *(b.form if forms else ()))
-    chosen = ir.branch(condition.items[0], then, otherwise)
-    n = len(a.items)
-    form = (chosen[n], chosen[n + 1]) if forms else None
-    if forms and all(ir.is_const(x) and x.value == 0.0 for x in form):
-        form = INDEPENDENT
-    return Value(a.type, tuple(chosen[:n]), form, max(a.degree, b.degree), a.underivable or b.underivable)
+def _chosen(condition: Value, a: list[Value], b: list[Value]) -> list[Value]:
+    """Each of `a` where the condition holds, else of `b`, as one IR branch
+    (only the rays that need a side compute it)."""
+    then, otherwise, layout = [], [], []
+    for x, y in zip(a, b):
+        forms = x.form is not None and y.form is not None
+        layout.append((len(x.items), forms))
+        then += [*x.items, *(x.form if forms else ())]
+        otherwise += [*y.items, *(y.form if forms else ())]
+    chosen = ir.branch(condition.items[0], tuple(then), tuple(otherwise)) if then else ()
+    values, i = [], 0
+    for x, y, (n, forms) in zip(a, b, layout):
+        items, form = tuple(chosen[i:i + n]), (tuple(chosen[i + n:i + n + 2]) if forms else None)
+        i += n + 2 * forms
+        if forms and all(ir.is_const(f) and f.value == 0.0 for f in form):
+            form = INDEPENDENT
+        values.append(Value(x.type, items, form, max(x.degree, y.degree), x.underivable or y.underivable))
+    return values
 
 
 # ---- functions -----------------------------------------------------------------
@@ -428,9 +455,15 @@ def _map(name: str, degree: Callable[[list[float]], float], derivable: bool = Tr
 
 
 def _select(condition: Value, a: Value, b: Value) -> Value:
+    """Per component, both sides computed (cheap ones; 'if' computes only the side a ray needs)."""
     if a.type != b.type:
         raise ValueError("types")
-    return _chosen(condition, a, b)
+    forms = a.form is not None and b.form is not None
+    form = tuple(ir.op("select", condition.items[0], x, y) for x, y in zip(a.form, b.form)) if forms else None
+    if forms and all(ir.is_const(x) and x.value == 0.0 for x in form):
+        form = INDEPENDENT
+    return Value(a.type, tuple(ir.op("select", condition.items[0], x, y) for x, y in zip(a.items, b.items)), form,
+                 max(a.degree, b.degree), a.underivable or b.underivable)
 
 
 def _vector_fn(function: Callable, result: str):
@@ -489,7 +522,8 @@ FUNCTIONS: dict[str, Function] = {
     "quaternion_multiply": Function(("4", "4"), _quaternion_multiply, "quaternion_multiply(a, b)"),
     # math
     **{name: Function(("any",), _map(name, _smooth(name)), f"{name}(x)")
-       for name in ("sin", "cos", "tan", "asin", "acos", "atan", "sqrt", "abs", "exp", "log", "radians", "degrees")},
+       for name in ("sin", "cos", "tan", "asin", "acos", "atan", "sqrt", "rsqrt", "abs", "exp", "log", "radians",
+                    "degrees")},
     **{name: Function(("any",), _map(name, lambda d: 0.0, derivable=False), f"{name}(x)") for name in ("floor", "round")},
     "atan2": Function(("any", "any"), _map("atan2", _smooth("atan2")), "atan2(y, x)"),
     "min": Function(("any", "any"), _map("min", _smooth("min")), "min(a, b)"),
@@ -551,7 +585,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
     z = point_value
     carried: list[dict[str, Value]] = []
     for use in _unique(sequence):
-        env = {**_environment(use), "z": z, "c": _constant(julia, z, point)}
+        env = {"c": _constant(julia, z, point), **_environment(use), "z": z}
         out = interpreter.run(use.formula.init, env, _readonly(use))
         z = out["z"]
         if z.type not in ("vec3", "vec4"):
@@ -579,8 +613,8 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
             raise Mistake(where or use.formula.span, "a hybrid's formulas must all work on 3-vectors "
                                                      "or all on 4-vectors")
         if value.type != z.type:
-            where = _last_z(use.formula)
-            raise Mistake(where.span if where else use.formula.span,
+            assigned = _last_z(use.formula)
+            raise Mistake(assigned.span if assigned else use.formula.span,
                           f"z is {_word(z)} before the step and {_word(value)} after it")
     own = [u for u in uses if u.formula.own_estimate]
     if own and len(sequence) > 1:
@@ -600,72 +634,80 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
 
     steps = [(k, use) for k, use in enumerate(uses) for _ in range(_count(sequence, use))]
     period = len(steps)
-    flat_carried = [(k, name) for k, values in enumerate(carried) for name in values]
     dims = len(z.items)
+    # the loop's carried values, by name: z, each formula's own, dr (the
+    # scalar derivative), whether the ray stopped, the step count of a
+    # hybrid and the orbit trap
+    layout = [("z", dims), *(((k, name), len(v.items)) for k, values in enumerate(carried)
+                            for name, v in values.items())]
+    layout += [("dr", 1)] * use_scalar + [("stopped", 1)] + [("counter", 1)] * (period > 1) + [("trap", 4)] * trap
+
+    def unpack(state) -> dict:
+        fields, i = {}, 0
+        for key, width in layout:
+            fields[key] = tuple(state[i:i + width])
+            i += width
+        return fields
+
+    def pack(fields: dict) -> tuple:
+        return tuple(x for key, _ in layout for x in fields[key])
+
+    def formula_values(fields: dict, k: int, forms: bool) -> dict:
+        return {name: replace(v, items=fields[(k, name)],
+                              form=(None if name in dependent[k] else INDEPENDENT) if forms else v.form)
+                for name, v in carried[k].items()}
 
     def round_(state):
-        i = 0
-        zs = state[:dims]
-        i += dims
-        values = [dict(c_) for c_ in carried]
-        for k, name in flat_carried:
-            width = len(carried[k][name].items)
-            values[k][name] = replace(carried[k][name], items=tuple(state[i:i + width]),
-                                      form=INDEPENDENT if name not in dependent[k] else None)
-            i += width
-        dr, stopped, counter = state[i], state[i + 1], state[i + 2]
-        traps = state[i + 3:]
-        z_now = Value(z.type, tuple(zs), (ONE, ZERO), 1.0)
+        fields = unpack(state)
+        z_now = Value(z.type, fields["z"], (ONE, ZERO), 1.0)
+        (stopped,) = fields["stopped"]
         for j, (k, use) in enumerate(steps):
             # with one step per iteration the loop's condition stops the ray
             going = ir.Const(1.0, ir.MASK)
             if period > 1:
-                going = ir.op("and", ir.op("not", stopped), ir.op("lt", ir.add(counter, ir.const(float(j))),
-                                                                  iterations))
+                going = ir.op("and", ir.op("not", stopped),
+                              ir.op("lt", ir.add(fields["counter"][0], ir.const(float(j))), iterations))
                 if bailout is not None:
                     going = ir.op("and", going, _inside(z_now.items, bailout))
-            env = {**_environment(use), **values[k], "z": z_now, "c": c}
+            env = {"c": c, **_environment(use), **formula_values(fields, k, True), "z": z_now}
             out = interpreter.run(use.formula.step, env, _readonly(use))
             moved = out["z"]
-            length2 = ir.dot(moved.items, moved.items)
-            ok = ir.op("and", going, ir.op("le", length2, ir.const(OVERFLOW_LENGTH ** 2)))
-            items = tuple(ir.op("select", ok, a, b) for a, b in zip(moved.items, z_now.items))
-            for name in values[k]:
-                new = out[name]
-                values[k][name] = replace(values[k][name], items=tuple(
-                    ir.op("select", ok, a, b) for a, b in zip(new.items, values[k][name].items)))
+            ok = ir.op("and", going, ir.op("le", ir.dot(moved.items, moved.items), ir.const(OVERFLOW_LENGTH ** 2)))
+            kept = {"z": moved.items, **{(k, name): out[name].items for name in carried[k]}}
             if use_scalar:
                 a, b = moved.form
-                grown = ir.op("min", ir.add(ir.mul(a, dr), b), ir.const(MAX_DERIVATIVE))
-                dr = ir.op("select", ok, grown, dr)
+                kept["dr"] = (ir.op("min", ir.add(ir.mul(a, fields["dr"][0]), b), ir.const(MAX_DERIVATIVE)),)
+            if trap:   # `trap = point`: where the orbit trap measures (else z)
+                kept["trap"] = _trap_added(fields["trap"], out["trap"].items if "trap" in out else moved.items)
+            for key, items in kept.items():
+                fields[key] = tuple(ir.op("select", ok, a, b) for a, b in zip(items, fields[key]))
             stopped = ir.op("or", stopped, ir.op("and", going, ir.op("not", ok)))
-            if trap:
-                traps = tuple(ir.op("select", ok, t, old) for t, old in
-                              zip(_trap_added(traps, items), traps))
-            z_now = Value(z.type, items, (ONE, ZERO), 1.0)
-        flat = [x for k, name in flat_carried for x in values[k][name].items]
-        return (*z_now.items, *flat, dr, stopped, ir.add(counter, ir.const(float(period))), *traps)
+            if "stop" in out:               # `stop = condition`: these rays iterate no more
+                stopped = ir.op("or", stopped, ir.op("and", ok, out["stop"].items[0]))
+            z_now = Value(z.type, fields["z"], (ONE, ZERO), 1.0)
+        fields["stopped"] = (stopped,)
+        if period > 1:
+            fields["counter"] = (ir.add(fields["counter"][0], ir.const(float(period))),)
+        return pack(fields)
 
-    init = (*z.items, *(x for k, name in flat_carried for x in carried[k][name].items), ONE,
-            ir.Const(0.0, ir.MASK), ZERO, *((ir.const(1e30),) * 4 if trap else ()))
+    start = {"z": z.items, **{(k, name): v.items for k, values in enumerate(carried) for name, v in values.items()},
+             "dr": (ONE,), "stopped": (ir.Const(0.0, ir.MASK),), "counter": (ZERO,), "trap": (ir.const(1e30),) * 4}
     count = iterations if period == 1 else ir.op("floor", ir.div(ir.add(iterations, ir.const(period - 1.0)),
                                                                    ir.const(float(period))))
-    stopped_at = dims + sum(len(carried[k][name].items) for k, name in flat_carried) + 1
+    stops = any(_assignment(use.formula, "stop") for use in uses)
 
     def condition(state):
-        going = ir.op("not", state[stopped_at])
-        return going if bailout is None else ir.op("and", going, _inside(state[:dims], bailout))
+        if bailout is None and not stops:
+            return None     # a ray past the overflow limit keeps its state anyway (the selects above)
+        fields = unpack(state)
+        going = ir.op("not", fields["stopped"][0])
+        return going if bailout is None else ir.op("and", going, _inside(fields["z"], bailout))
 
-    final = ir.loop(init, count, round_, condition)
-    z_final = final[:dims]
-    i = dims
-    finals = [dict(c_) for c_ in carried]
-    for k, name in flat_carried:
-        width = len(carried[k][name].items)
-        finals[k][name] = replace(carried[k][name], items=tuple(final[i:i + width]))
-        i += width
-    dr = final[i]
-    traps = tuple(final[i + 3:]) if trap else ()
+    fields = unpack(ir.loop(pack(start), count, round_, condition))
+    z_final = fields["z"]
+    finals = [formula_values(fields, k, False) for k in range(len(carried))]
+    dr = fields["dr"][0] if use_scalar else None
+    traps = fields["trap"] if trap else ()
 
     def derived(name: str, args: list[Value], span: Span) -> Value:
         offset = args[0].items[0] if args else ZERO
@@ -675,7 +717,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
 
     last = uses[-1]
     if last.formula.final:
-        env = {**_environment(last), **finals[-1], "z": Value(z.type, tuple(z_final), None, 1.0), "c": c}
+        env = {"c": c, **_environment(last), **finals[-1], "z": Value(z.type, tuple(z_final), None, 1.0)}
         out = Interpreter(derived).run(last.formula.final, env, _readonly(last))
         distance = out.get("distance")
         if distance is None:
@@ -703,7 +745,8 @@ def _estimate(escape: bool, z, dr, point, scalar: bool, offset: ir.Expr) -> ir.E
 
 
 def _inside(z, bailout: ir.Expr) -> ir.Expr:
-    return ir.op("le", ir.dot(z, z), ir.mul(bailout, bailout))
+    # |z| itself, not |z|^2 against bailout^2: formulas compute |z| anyway, and it is then computed once
+    return ir.op("le", ir.length(z), bailout)
 
 
 def _trap_added(traps, z) -> tuple:
@@ -732,13 +775,18 @@ def _count(sequence, use) -> int:
     return sum(u.count for u in sequence if (u.formula.name, u.args) == (use.formula.name, use.args))
 
 
-def _last_z(formula: Formula):
+def _assignment(formula: Formula, name: str):
+    """The last step statement that sets `name`, or None."""
     found = None
     for s in formula.step:
         for inner in (s, *_nested(s)):
-            if isinstance(inner, ast.Assign) and inner.name == "z":
+            if isinstance(inner, ast.Assign) and inner.name == name:
                 found = inner
     return found
+
+
+def _last_z(formula: Formula):
+    return _assignment(formula, "z")
 
 
 def _step_values(interpreter, uses, carried, dependent, z: Value, c: Value) -> list[dict]:
@@ -747,13 +795,17 @@ def _step_values(interpreter, uses, carried, dependent, z: Value, c: Value) -> l
     results = []
     probe_z = Value(z.type, tuple(ir.Var(f"z{i}", ir.REAL) for i in range(len(z.items))), (ONE, ZERO), 1.0)
     for k, use in enumerate(uses):
-        env = {**_environment(use), "z": probe_z, "c": c}
+        env = {"c": c, **_environment(use), "z": probe_z}
         for name, v in carried[k].items():
             env[name] = replace(v, items=tuple(ir.Var(f"{name}{i}", ir.REAL) for i in range(len(v.items))),
                                 form=None if name in dependent[k] else INDEPENDENT)
         out = interpreter.run(use.formula.step, env, _readonly(use))
         if _last_z(use.formula) is None:
             raise Mistake(use.formula.span, f"'{use.formula.name}' never sets z in its step")
+        for name, want in (("stop", "mask"), ("trap", "vec3")):
+            if name in out and out[name].type != want:
+                raise Mistake(_assignment(use.formula, name).span,
+                              f"'{name}' must be {_WORDS[want]}, this is {_word(out[name])}")
         for name, v in carried[k].items():
             if name not in out:
                 raise Mistake(use.formula.span, f"'{name}' is set on only one side of an 'if'")
