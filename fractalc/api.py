@@ -17,6 +17,7 @@ import numpy as np
 
 from . import __version__, pathtrace, program, run
 from .build import build, open_device
+from .denoise import denoise_image, require_denoiser
 from .check import FLOAT_MAX, RENDER_KEYS, check, check_param_values, check_value, in_float_range
 from .emit import Target, emit, uniform_source
 from .errors import RenderError, SceneError, diagnostic
@@ -267,13 +268,19 @@ class Scene:
         return mesh(self, resolution, bounds, progress)
 
     def render(self, seed: int = 0, progress: bool = False, camera: Camera | None = None,
-               cluster=None, **render_keys) -> Image:
+               cluster=None, denoise: bool = False, **render_keys) -> Image:
         """Render with the file's settings, overridden by keyword (any render
         key: width=, height=, samples=, ao=, max_steps=, ...); `camera`
         replaces the file's camera (no rebuild); `aovs` names the passes
         to add to the default channels (passes.PASSES: P, diffuse, ...).
         `cluster`: a Dask client (distributed.Client) whose workers render
-        the image in row tiles (docs/cluster.md)."""
+        the image in row tiles (docs/cluster.md). `denoise`: the colour
+        denoised by Intel Open Image Denoise (the 'denoise' extra), guided
+        by the albedo pass, which the image then has (docs/looks.md)."""
+        if denoise:
+            require_denoiser()
+            aovs = tuple(render_keys.pop("aovs", None) or ()) + ("albedo",)
+            return denoise_image(self.render(seed, progress, camera, cluster, aovs=aovs, **render_keys))
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2 ** 32:
             raise ValueError(f"seed must be a whole number from 0 to {2 ** 32 - 1}, not {seed!r}")
         if cluster is not None:

@@ -134,7 +134,8 @@ class _Checker:
         else:
             value = self.evaluate(scene.shape)
             if value.type not in (SHAPE, "error"):
-                self.error(scene.shape.span, f"'scene' needs a shape, this is {_TYPE_WORDS[value.type]}")
+                hint = " (make it one with 'fractal(formula(...), iterations: N)')" if value.type == FORMULA else ""
+                self.error(scene.shape.span, f"'scene' needs a shape, this is {_TYPE_WORDS[value.type]}{hint}")
             shape = value.data
         camera = self.camera(singles.get(ast.CameraDecl))
         lights = tuple(self.light(d) for d in decls if isinstance(d, ast.LightDecl))
@@ -241,6 +242,8 @@ class _Checker:
 
     def repeated(self, e: ast.Binary, formula: Value, count: Value) -> Value:
         """`formula * n`: n steps of it in turn in a hybrid."""
+        if count.type == SHAPE:
+            self.fail(e.left.span, "this is a formula: make it a shape with 'fractal(formula(...), iterations: N)'")
         if e.op != "*" or count.type != NUM:
             self.fail(e.span, f"a formula can only be repeated: 'formula * count', not '{e.op}' "
                               f"with {_TYPE_WORDS[count.type]}")
@@ -431,7 +434,9 @@ class _Checker:
         if left.type == FORMULA:
             return self.repeated(e, left, right)
         if right.type == FORMULA:
-            self.fail(e.span, "a formula's repeat count goes after it: 'formula * count'")
+            self.fail(e.right.span if left.type == SHAPE else e.span,
+                      "this is a formula: make it a shape with 'fractal(formula(...), iterations: N)'"
+                      if left.type == SHAPE else "a formula's repeat count goes after it: 'formula * count'")
         if e.op not in "+-*/|&":
             self.fail(e.span, f"'{e.op}' compares numbers in a formula; a scene has no comparisons")
         if left.type == SHAPE and right.type == SHAPE:

@@ -182,7 +182,8 @@ def command_render(args) -> int:
     try:
         start = time.perf_counter()
         with cluster as client:
-            image = scene.render(seed=args.seed, progress=not args.quiet, cluster=client, **overrides)
+            image = scene.render(seed=args.seed, progress=not args.quiet, cluster=client, denoise=args.denoise,
+                                 **overrides)
     except ValueError as error:
         raise UsageError(str(error)) from None
     image.save(args.output, half=args.half, compression=args.compression or "zip", bits=args.bits)
@@ -468,6 +469,9 @@ def _parser() -> argparse.ArgumentParser:
                                  description="Render a scene. EXR: linear float with Z, normals and "
                                              "steps; PNG: sRGB 8-bit.")
     render.add_argument("scene")
+    render.add_argument("--denoise", action="store_true",
+                        help="denoise the colour with Intel Open Image Denoise (the 'denoise' extra; "
+                             "for path-traced images, see docs/looks.md)")
     render.add_argument("-o", "--output", required=True, help="output image (.exr, .png, ...)")
     render.add_argument("--half", action="store_true", help="EXR: half-float channels (Z and P stay float)")
     render.add_argument("--compression", choices=COMPRESSIONS, help="EXR compression (default zip)")

@@ -13,6 +13,7 @@ PASSES = {
     "shadow": ("shadow",),
     "glow": ("glow.R", "glow.G", "glow.B"),
     "material": ("material",),
+    "albedo": ("albedo.R", "albedo.G", "albedo.B"),
 }
 
 

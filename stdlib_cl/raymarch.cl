@@ -611,6 +611,15 @@ __kernel void render(__global float *out, __constant scalar *params,
         material = SELECT(material, surface_at(v3_add(origin, v3_scale(dir, centre.t)), params).material, centre.hit);
     store_channel(TO_FLOAT(material), CHANNEL_MATERIAL, block, pitch);
 #endif
+#if FEATURE_PASS_ALBEDO
+    // the hit's material colour (a denoiser's guide); 0 where the ray missed
+    vec3 albedo = v3((real)0.0f, 0.0f, 0.0f);
+    if (ANY(centre.hit)) {
+        surface s = surface_at(v3_add(origin, v3_scale(dir, centre.t)), params);
+        albedo = v3_select(albedo, v3(s.red, s.green, s.blue), centre.hit);
+    }
+    store_vec3(albedo, CHANNEL_ALBEDO_R, block, pitch);
+#endif
 }
 
 // Distance estimates at points: `points` holds count x's, then count y's,

@@ -189,3 +189,45 @@ def test_the_viewer_keeps_refining_a_still_path_traced_view(tmp_path, monkeypatc
             errors[viewer.samples] = np.sqrt(((viewer.linear - reference) ** 2).mean())
     assert viewer.samples == 64
     assert errors[64] < 0.5 * errors[8], errors      # 1/sqrt(8) would be 0.35
+
+
+def test_the_albedo_pass_is_the_material_colour_of_the_centre_hit():
+    scene = fractalc.loads(SCENE)
+    image = scene.render(aovs=["albedo", "material"])
+    albedo, material = image.passes["albedo"], image.passes["material"][..., 0]
+    materials = list(scene.checked.materials.values())      # the material pass's numbering
+    found = np.unique(material[material >= 0]).astype(int)
+    assert len(found) == 3
+    for index in found:
+        colour = [c.value for c in materials[index].color.items]
+        assert np.all(albedo[material == index] == np.float32(colour))
+    assert np.all(albedo[material == -1] == 0)
+
+
+def test_denoising_without_open_image_denoise_says_how_to_install_it(tmp_path, monkeypatch, capsys):
+    import sys
+    from fractalc.cli import main
+    monkeypatch.setitem(sys.modules, "pyoidn", None)       # as if not installed
+    with pytest.raises(fractalc.RenderError, match=r"pip install 'fractalc\[denoise\]'"):
+        fractalc.loads(SCENE).render(denoise=True)
+    scene_file = tmp_path / "scene.frac"
+    scene_file.write_text(SCENE)
+    out = tmp_path / "out.png"
+    assert main(["render", str(scene_file), "-o", str(out), "-q", "--denoise"]) == 1
+    error = capsys.readouterr().err
+    assert "--denoise needs Intel Open Image Denoise" in error and len(error.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_denoising_a_path_traced_image_brings_it_nearer_the_converged_one():
+    pytest.importorskip("pyoidn")
+    scene = fractalc.loads(SCENE)
+    keys = {"width": 64, "height": 48}
+    reference = scene.render(samples=1024, seed=5, **keys).rgba[..., :3]
+    noisy = scene.render(samples=16, seed=1, **keys)
+    denoised = scene.render(samples=16, seed=1, denoise=True, **keys)
+    error = {name: np.sqrt(((image.rgba[..., :3] - reference) ** 2).mean())
+             for name, image in (("noisy", noisy), ("denoised", denoised))}
+    assert error["denoised"] < error["noisy"] / 1.5, error
+    assert np.array_equal(denoised.rgba[..., 3], noisy.rgba[..., 3]) and "albedo" in denoised.passes
+    assert denoised.metadata["denoised"].startswith("Intel Open Image Denoise")

@@ -1,0 +1,259 @@
+"""Formulas written in the language (docs/formulas.md): every kind of
+mistake is a located error; the derived estimates against float64 numpy
+references written here (finite differences where the map is not a
+similarity); scalar and Jacobian derivatives agree on a conformal map;
+hybrids step in Mandelbulber's order; the kernel agrees with the IR's
+float64 meaning in float and double and stays finite at the hard cases;
+formula arguments are params (no rebuild)."""
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import fractalc
+from fractalc import build as build_module, formula_code, ir
+from fractalc.check import library_formulas
+from fractalc.errors import SceneError
+from fractalc.parse import parse
+
+POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
+
+
+def _error(source: str) -> str:
+    with pytest.raises(SceneError) as caught:
+        fractalc.loads(source, path="t.frac")
+    return str(caught.value).splitlines()[0]
+
+
+DOUBLE = "formula f() {\n    z = z * 2 + c\n}\n"
+MISTAKES = [
+    ("formula f() {\n    z = z * q + c\n}\nscene fractal(f())", "2:13", "unknown name 'q' in formula"),
+    ("formula f() {\n    z = boxfold(z, 1) + c\n}\nscene fractal(f())", "2:9", "unknown function 'boxfold'"),
+    ("formula f() {\n    z = box_fold(z) + c\n}\nscene fractal(f())", "2:9", "'box_fold' takes 2 arguments"),
+    ("formula f() {\n    z = box_fold(z, (1, 2, 3)) + c\n}\nscene fractal(f())", "2:21", "needs a number here"),
+    ("formula f() {\n    w = z + c\n}\nscene fractal(f())", "1:1", "'f' never sets z"),
+    ("formula f() {\n    z = length(z)\n}\nscene fractal(f())", "2:5", "z is a 3-vector before the step and a number"),
+    ("formula f() {\n    if z.x { z = z * 2 }\n    z = z + c\n}\nscene fractal(f())", "2:8", "'if' needs a comparison"),
+    ("formula f() {\n    if z.x < 0 { k = 2 }\n    z = z * k + c\n}\nscene fractal(f())", "3:13",
+     "'k' is set on only one side of the 'if' at line 2"),
+    ("formula f() {\n    if z.x < 0 { init k = 2 }\n    z = z + c\n}\nscene fractal(f())", "2:18",
+     "'init' goes at the top of a formula"),
+    ("formula f(s = 2) {\n    s = 3\n    z = z * s + c\n}\nscene fractal(f())", "2:5", "(it is a parameter)"),
+    ("formula f() {\n    c = z\n    z = z + c\n}\nscene fractal(f())", "2:5", "(it is the constant)"),
+    ("param t = 1\nformula f(s = t) {\n    z = z * s + c\n}\nscene fractal(f())", "2:15", "default must be a constant"),
+    ("formula f(s = 2 in [3, 1]) {\n    z = z * s + c\n}\nscene fractal(f())", "1:21", "the range [3, 1] is empty"),
+    ("formula f(s = 5 in [0, 1]) {\n    z = z * s + c\n}\nscene fractal(f())", "1:15", "outside its range [0, 1]"),
+    ("formula f(s = 0.5 in [0, 1]) {\n    z = z * s + c\n}\nscene fractal(f(s: 3))", "4:20",
+     "'s' of 'f' must be between 0 and 1, not 3"),
+    (DOUBLE + "scene fractal(hybrid(f() * 1.5))", "4:28", "repeat count must be a constant whole number"),
+    (DOUBLE + "scene fractal(hybrid(f(), sphere(1)))", "4:27", "'hybrid' takes formulas"),
+    ("scene fractal(sphere(1))", "1:15", "'fractal' needs a formula"),
+    (DOUBLE + "scene fractal(f(), julia: (1, 2, 3, 4))", "4:7", "'julia' must be a 3-vector like z"),
+    ("formula f() {\n    z = z * 2 + c\n    final distance = length(z)\n}\nformula g() {\n    z = z * 3 + c\n}\n"
+     "scene fractal(hybrid(f(), g()))", "8:7", "gives its own 'final distance': it cannot be part of a hybrid"),
+    ("formula f() {\n    z = floor(z) * 2 + c\n}\nscene fractal(f())", "2:9",
+     "the distance estimate cannot be derived through this"),
+    ("formula f() {\n    z = z * 2 + c\n    final distance = z\n}\nscene fractal(f())", "3:22",
+     "'distance' must be a number, this is a 3-vector"),
+    ("formula f() {\n    z = z * 2 + c\n    final r = length(z)\n}\nscene fractal(f())", "3:5",
+     "'final' lines must set 'distance'"),
+    ("formula f() {\n    z = z * 2 + c\n    stop = 1\n}\nscene fractal(f())", "3:5", "'stop' must be a comparison"),
+    ("formula f(s = 1, s = 2) {\n    z = z * s + c\n}\nscene fractal(f())", "1:18", "'s' is already a parameter"),
+    ("formula f(z = 1) {\n    z = z + c\n}\nscene fractal(f())", "1:11", "'z' is the formula's own"),
+    ("formula sphere() {\n    z = z + c\n}\nscene sphere(1)", "1:9", "'sphere' is a built-in name"),
+    ("formula f() {\n    if z < 1 { z = z * 2 }\n    z = z + c\n}\nscene fractal(f())", "2:8", "'<' compares numbers"),
+    ("scene sphere(1 < 2)", "1:14", "a scene has no comparisons"),
+    ("formula f() {\n    z = z * 2 + c\n    d = linear_estimate()\n}\nscene fractal(f())", "3:9",
+     "use it in a 'final' line"),
+    ("formula f() {\n    z = z.xyq + c\n}\nscene fractal(f())", "2:11", "'.xyq' is not a component of a 3-vector"),
+    ("formula f() {\n    z = (z, 1) + c\n}\nscene fractal(f())", "2:9", "'+' on vectors of different sizes (4 and 3)"),
+    ("formula f() {\n    z = z.scale(2) + c\n}\nscene fractal(f())", "2:11", "transforms shapes; in a formula"),
+    ("formula f() {\n    z = z * log(0) + c\n}\nscene fractal(f())", "2:13", "'log' is undefined for these values"),
+    (DOUBLE + "scene f() | sphere(1)", "4:7", "this is a formula: make it a shape with 'fractal("),
+    (DOUBLE + "scene f()", "4:7", "'scene' needs a shape, this is a formula"),
+]
+
+
+@pytest.mark.parametrize("source, place, message", MISTAKES, ids=[m[2][:40] for m in MISTAKES])
+def test_each_formula_mistake_is_a_located_error(source, place, message):
+    first = _error(source)
+    assert first.startswith(f"t.frac:{place}: error: "), first
+    assert message in first, first
+
+
+def test_formula_mistakes_exit_2_with_a_caret_and_no_traceback(tmp_path):
+    scene = tmp_path / "bad.frac"
+    scene.write_text("formula f() {\n    z = boxfold(z, 1) + c\n}\nscene fractal(f())\n")
+    result = subprocess.run([sys.executable, "-m", "fractalc", "check", str(scene)], capture_output=True, text=True)
+    assert result.returncode == 2
+    assert "bad.frac:2:9: error: unknown function 'boxfold'" in result.stderr
+    assert "^^^^^^^" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_statements_parse_by_phase_with_else_if():
+    program = parse("formula f(s = 2 in [1, 3]) {\n    init k = 1\n    if z.x < 0 { z = -z } else if z.y < 0 {\n"
+                    "        z = z * s\n    } else { k = k * 2 }\n    z = z + c\n    final distance = length(z) / k\n}\n"
+                    "scene fractal(f())")
+    formula = formula_code.split(program.decls[0])
+    assert [s.name for s in formula.init] == ["k"] and [s.name for s in formula.final] == ["distance"]
+    branch = formula.step[0]
+    assert branch.otherwise[0].then[0].name == "z" and branch.otherwise[0].otherwise[0].name == "k"
+    assert formula.carried == ("k",)
+
+
+# ---- derived estimates against numpy -------------------------------------------
+
+def _numpy_box(points, scale, julia, iterations):
+    """The amazing box iteration in float64: box fold at 1, sphere fold
+    (min radius 0.5, fixed 1), z -> scale z + c, with the scalar running
+    derivative (dr -> |scale| fold dr, + 1 when c is the point)."""
+    z, dr = points.copy(), np.ones(len(points))
+    c = points if julia is None else np.broadcast_to(julia, points.shape)
+    for _ in range(iterations):
+        z = np.clip(z, -1, 1) * 2 - z
+        r2 = np.maximum(np.sum(z * z, axis=1), 1e-30)
+        fold = np.clip(1 / r2, 1, 4)
+        z = scale * z * fold[:, None] + c
+        dr = abs(scale) * fold * dr + (1 if julia is None else 0)
+    return np.linalg.norm(z, axis=1) / dr
+
+
+def _orbit(name, args, julia=None, iterations=6, jacobian=None, bailout=None):
+    formula = dict(library_formulas())[name][0]
+    return formula_code.orbit((formula_code.Use(formula, tuple(ir.const(a) for a in args)),), POINT,
+                              ir.const(float(iterations)), bailout, julia, jacobian=jacobian)
+
+
+def test_library_box_gets_the_scalar_derivative_and_matches_numpy():
+    points = np.random.default_rng(4).uniform(-3, 3, (400, 3))
+    found = _orbit("amazing_box", (2.0, 1.0, 0.5, 1.0))
+    assert found.scalar
+    de = ir.evaluate_at((found.distance,), points)[0]
+    np.testing.assert_allclose(de, _numpy_box(points, 2.0, None, 6), rtol=1e-12)
+
+
+def test_scalar_and_jacobian_derivatives_agree_on_a_conformal_map():
+    """In Julia mode z -> s fold(z) + c is a similarity at every point, so
+    the Jacobian's estimate is the scalar one (Syntopia part VII)."""
+    julia = ir.vec(ir.const(0.3), ir.const(-0.2), ir.const(0.1))
+    points = np.random.default_rng(5).uniform(-2, 2, (300, 3))
+    scalar = _orbit("amazing_box", (-1.5, 1.0, 0.5, 1.0), julia, jacobian=False)
+    full = _orbit("amazing_box", (-1.5, 1.0, 0.5, 1.0), julia, jacobian=True)
+    assert scalar.scalar and not full.scalar
+    a = ir.evaluate_at((scalar.distance,), points)[0]
+    b = ir.evaluate_at((full.distance,), points)[0]
+    np.testing.assert_allclose(b, a, rtol=1e-9)
+    np.testing.assert_allclose(a, _numpy_box(points, -1.5, np.array([0.3, -0.2, 0.1]), 6), rtol=1e-12)
+
+
+STRETCHED = """formula stretched(k = 1.3) {
+    z = (z.x * z.x - z.y * z.y, 2 * z.x * z.y, k * z.z) + c
+}
+scene fractal(stretched(), iterations: 4, bailout: 1000000)
+"""
+
+
+def _numpy_stretched(points, k, iterations):
+    z = points.copy()
+    for _ in range(iterations):
+        z = np.stack([z[:, 0] ** 2 - z[:, 1] ** 2, 2 * z[:, 0] * z[:, 1], k * z[:, 2]], axis=1) + points
+    return z
+
+
+def test_jacobian_estimate_against_finite_differences_of_numpy():
+    """Not a similarity (a complex square beside a stretch): the compiler
+    carries the Jacobian; its escape-time estimate 0.5 r^2 ln r / |J^T z|
+    against the same from a central-difference Jacobian of the numpy map."""
+    scene = fractalc.loads(STRETCHED)
+    (use,) = scene.checked.shape.sequence
+    found = formula_code.orbit((use,), POINT, ir.const(4.0), ir.const(1e6))
+    assert not found.scalar
+    points = np.random.default_rng(6).uniform(-0.8, 0.8, (200, 3))
+    de = ir.evaluate_at((found.distance,), points)[0]
+    z = _numpy_stretched(points, 1.3, 4)
+    h = 1e-5
+    jacobian = np.stack([(_numpy_stretched(points + h * e, 1.3, 4) - _numpy_stretched(points - h * e, 1.3, 4)) / (2 * h)
+                         for e in np.eye(3)], axis=2)           # (N, 3 rows of z, 3 directions)
+    r = np.linalg.norm(z, axis=1)
+    expected = 0.5 * r ** 2 * np.log(r) / np.linalg.norm(np.einsum("nij,ni->nj", jacobian, z), axis=1)
+    smooth = r > 1.5        # away from r = 1, where ln r and the estimate vanish
+    assert smooth.sum() > 50
+    np.testing.assert_allclose(de[smooth], expected[smooth], rtol=1e-6)
+
+
+def test_hybrid_steps_in_turn_counting_each_step():
+    """hybrid(f * 2, g): f, f, g, f, f, g, ...; with f adding (1, 0, 0) and g
+    doubling, the linear estimate |z| / dr is known in closed form."""
+    text = ("formula shift() {\n    z = z + (1, 0, 0)\n}\nformula double() {\n    z = 2 * z\n}\n"
+            "scene fractal(hybrid(shift() * 2, double()), iterations: {n})")
+    points = np.random.default_rng(7).uniform(-1, 1, (50, 3))
+    shifted = points + [2, 0, 0]
+    for n, expected in ((3, np.linalg.norm(shifted * 2, axis=1) / 2),
+                        (4, np.linalg.norm(shifted * 2 + [1, 0, 0], axis=1) / 2),
+                        (6, np.linalg.norm((shifted * 2 + [2, 0, 0]) * 2, axis=1) / 4)):
+        shape = fractalc.loads(text.replace("{n}", str(n))).checked.shape
+        found = formula_code.orbit(shape.sequence, POINT, shape.iterations, shape.bailout)
+        np.testing.assert_allclose(ir.evaluate_at((found.distance,), points)[0], expected, rtol=1e-12)
+
+
+# ---- in the kernel ------------------------------------------------------------------
+
+HYBRID = """formula bulb8(power = 8 in [2, 12]) {
+    z = triplex_power(z, power) + c
+}
+scene fractal(hybrid(bulb8() * 2, amazing_box(scale: -1.5)), iterations: 9, bailout: 4)
+"""
+QUATERNION = """formula quaternion(w = 0 in [-1, 1]) {
+    init z = (z, w)
+    z = quaternion_square(z) + c
+}
+scene fractal(quaternion(), iterations: 10, bailout: 4)
+"""
+HARD_POINTS = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, -1], [2, 0, 0], [0, 4, 0], [1e6, 0, 0],
+                        [0, -1e6, 3], [1e18, 1e18, 1e18], [1e-30, 0, 0], [4 / 3 ** 0.5] * 3], dtype=float)
+
+
+@pytest.mark.parametrize("text", [HYBRID, QUATERNION], ids=["hybrid", "quaternion"])
+@pytest.mark.parametrize("precision, tolerance", [("float", 1e-3), ("double", 1e-9)])
+def test_kernel_matches_the_float64_meaning_and_is_finite_at_hard_cases(text, precision, tolerance):
+    scene = fractalc.loads(text, precision=precision)
+    shape = scene.checked.shape
+    expected_de = formula_code.orbit(shape.sequence, POINT, shape.iterations, shape.bailout).distance
+    points = np.random.default_rng(8).uniform(-1.5, 1.5, (2000, 3))
+    got = scene.distance(points)
+    expected = ir.evaluate_at((expected_de,), points)[0]
+    relative = np.abs(got - expected) / np.maximum(np.abs(expected), 1e-3)
+    assert np.percentile(relative, 99) < tolerance
+    hard = scene.distance(HARD_POINTS)
+    assert np.all(np.isfinite(hard)), hard
+    assert hard[7] > 1e3 and hard[9] > 1e3      # far away, the estimate says so
+
+
+def test_formula_arguments_are_params_without_a_rebuild():
+    text = ("param s = 2 in [1.5, 3]\n" + f"# {np.random.default_rng().integers(1 << 40)}\n"
+            "camera { position: (0, -14, 6), target: (0, 0, 0) }\n"
+            "scene fractal(amazing_box(scale: s), iterations: 8, bound: 7)")
+    scene = fractalc.loads(text)
+    first = scene.render(width=32, height=24)
+    builds = build_module.statistics.builds
+    scene.set_params({"s": 2.8})
+    second = scene.render(width=32, height=24)
+    assert build_module.statistics.builds == builds
+    assert not np.array_equal(first.depth, second.depth)
+
+
+def test_a_files_formula_replaces_the_librarys():
+    text = "formula amazing_box() {\n    z = 3 * z + c\n}\nscene fractal(amazing_box(), iterations: 2)"
+    scene = fractalc.loads(text)
+    # z = 3 (3p + p) + p = 13 p; dr = 3 (3 + 1) + 1 = 13: the linear estimate is |p|
+    np.testing.assert_allclose(scene.distance(np.array([[0.5, 0.2, 0.1]])), [np.linalg.norm([0.5, 0.2, 0.1])],
+                               rtol=1e-5)
+
+
+def test_an_underivable_step_is_allowed_with_the_formulas_own_estimate():
+    text = ("formula cells() {\n    z = (z - floor(z)) * 2 + c\n    final distance = length(z) - 1\n}\n"
+            "scene fractal(cells(), iterations: 1)")
+    p = np.array([[0.25, 1.5, -0.75]])
+    z = (p - np.floor(p)) * 2 + p
+    np.testing.assert_allclose(fractalc.loads(text).distance(p), np.linalg.norm(z, axis=1) - 1, rtol=1e-5)
