@@ -4,7 +4,11 @@ against the IR builders they replaced (fractalc/fractals.py before commit
 double, and depth maps of 64x48 renders.
 
     git show c4f39e7:fractalc/fractals.py > /tmp/old_fractals.py
-    python benchmarks/builtins_as_formulas.py /tmp/old_fractals.py
+    python benchmarks/builtins_as_formulas.py /tmp/old_fractals.py [OLD.cl NEW.cl]
+
+With OLD.cl and NEW.cl it also writes bulb-640's kernel both ways (from
+the same template, in one process), for
+`python benchmarks/handwritten_vs_ir.py OLD.cl NEW.cl 12`.
 """
 import importlib.util
 import sys
@@ -21,6 +25,13 @@ spec = importlib.util.spec_from_file_location("fractalc.old_fractals", sys.argv[
 old = importlib.util.module_from_spec(spec)
 sys.modules[spec.name] = old
 spec.loader.exec_module(old)
+
+root = Path(__file__).resolve().parent.parent
+if len(sys.argv) == 4:
+    for module, out in ((old, sys.argv[2]), (fractals, sys.argv[3])):
+        lower.orbit = module.orbit                   # the lowering's fractal builders
+        Path(out).write_text(fractalc.load(str(root.parent / "shared/bench/bulb-640.frac"), lanes=16).kernel_source())
+    lower.orbit = fractals.orbit
 
 P = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
 c = ir.const
@@ -50,7 +61,6 @@ print()
 SCENES = {"mandelbulb": "examples/mandelbulb.frac", "julia": "examples/julia.frac",
           "mandelbox": "examples/mandelbox.frac", "menger": "examples/menger.frac",
           "sierpinski": "examples/sierpinski.frac"}
-root = Path(__file__).resolve().parent.parent
 for name, path in SCENES.items():
     depths = []
     for module in (old, fractals):

@@ -17,22 +17,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from kernel_harness import evaluate_in_kernel  # noqa: E402
 
-from fractalc import formulas as F  # noqa: E402
-from fractalc import ir  # noqa: E402
+import fractalc  # noqa: E402
+from fractalc import formula_code, ir  # noqa: E402
 
 P = ir.components(ir.Var("p", ir.VEC3))
-
-
-def amazing_box(z, c):
-    folded = F.box_fold(z, ir.const(1.0))
-    inverted = F.sphere_fold(folded.z, ir.const(0.5), ir.const(1.0))
-    return [folded, inverted, F.scale(inverted.z, ir.const(2.0))]
-
-
+BULB = "formula bulb(power = 8) {\n    z = triplex_power(z, power) + c\n}\n"
+# name -> (a scene using the formula, the half-width of the cube of points)
 CASES = {
-    "mandelbulb (power 8, 12 iterations)": (F.Formula("mandelbulb", lambda z, c: [F.triplex_power(z, ir.const(8.0))]),
-                                            "escape", 2.0, 1.3),
-    "amazing box (scale 2, 12 iterations)": (F.Formula("amazing_box", amazing_box), "linear", 1e30, 3.0),
+    "triplex power 8, 12 iterations": (BULB + "scene fractal(bulb(), iterations: 12, bailout: 2)", 1.3),
+    "amazing box (scale 2), 12 iterations": ("scene fractal(amazing_box(), iterations: 12)", 3.0),
 }
 
 
@@ -45,12 +38,13 @@ def main() -> int:
     lanes = 8
     rng = np.random.default_rng(1)
     print(f"{args.points} points, {args.precision}, {lanes} lanes, median of {args.repeat} alternating runs")
-    for name, (formula, kind, bailout, extent) in CASES.items():
+    for name, (text, extent) in CASES.items():
         points = rng.uniform(-extent, extent, (args.points, 3))
+        shape = fractalc.loads(text).checked.shape
         times = {}
         for path, jacobian in (("scalar dr", False), ("Jacobian", True)):
-            estimate = F.orbit(P, [(formula, 1)], ir.Const(12.0, ir.INT), ir.const(bailout), kind=kind,
-                               jacobian=jacobian).distance
+            estimate = formula_code.orbit(shape.sequence, P, shape.iterations, shape.bailout,
+                                          jacobian=jacobian).distance
             evaluate_in_kernel(estimate, points[:lanes * 64], args.precision, lanes)     # build once
             times[path] = (estimate, [])
         for _ in range(args.repeat):

@@ -1,9 +1,7 @@
-"""Fractal formulas from building blocks, and their distance estimates.
+"""The building blocks of fractal formulas (the functions formulas call in
+the language: fractalc/formula_code.py).
 
-A formula is one iteration step over a state: the point `z` (and a fourth
-component `w` for quaternion formulas) and the constant `c` (the sample
-point, or a Julia constant). It is written with the building blocks below,
-each an IR expression of z with, where it has one, its conformal factor:
+Each is an IR expression of z with, where it has one, its conformal factor:
 the scalar by which it scales lengths around z (a similarity at every
 point: folds, reflections, rotations, uniform scales, sphere folds and
 inversions). When every block of a formula has one, the running
@@ -12,18 +10,13 @@ and cheap (Syntopia, "Distance Estimated 3D Fractals", part VI); otherwise
 the compiler carries the Jacobian (fractalc/derive.py, part VII). The
 triplex power of the Mandelbulb is not conformal; its standard scalar rule
 n r^(n-1) is the `approximate` factor the contract defines (part V).
-
-`orbit(...)` runs a formula, or a hybrid of several, for a number of
-iterations with a bailout and gives the estimate of its kind: escape-time
-(0.5 r ln r / |dr|) or linear ((r - offset) / |dr|).
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable
 
-from . import derive, ir
+from . import ir
 
 Vector = tuple[ir.Expr, ...]
 
@@ -164,82 +157,3 @@ def quaternion_multiply(a: Vector, b: Vector) -> Vector:
             s(p(p(m(a0, b1), m(a1, b0)), m(a2, b3)), m(a3, b2)),
             p(s(p(m(a0, b2), m(a1, b3)), m(a2, b0)), m(a3, b1)),
             p(p(s(m(a0, b3), m(a1, b2)), m(a2, b1)), m(a3, b0)))
-
-
-# ---- formulas and hybrids --------------------------------------------------------
-
-@dataclass(frozen=True)
-class Formula:
-    """One iteration step: `step(z, c)` gives the blocks applied in turn
-    (the last one's z is the new z) and whether c is added after them."""
-    name: str
-    step: Callable[[Vector, Vector], list[Block]]
-    dimensions: int = 3              # 4: quaternion state (x, y, z, w)
-    adds_c: bool = True
-
-
-@dataclass(frozen=True)
-class Estimate:
-    distance: ir.Expr
-    scalar: bool                     # by a scalar running derivative (else the Jacobian)
-    z: Vector                        # the orbit's last point
-
-
-def _apply(formula: Formula, z: Vector, c: Vector) -> tuple[Vector, ir.Expr | None, bool]:
-    """z after one step, the product of its blocks' factors (None if one
-    is not conformal) and whether that factor is approximate."""
-    factor, approximate = _c(1.0), False
-    for block in formula.step(z, c):
-        z = block.z
-        factor = None if factor is None or block.factor is None else ir.mul(factor, block.factor)
-        approximate = approximate or block.approximate
-    if formula.adds_c:
-        z = tuple(ir.add(a, b) for a, b in zip(z, c))
-    return z, factor, approximate
-
-
-def orbit(point: Vector, sequence: list[tuple[Formula, int]], iterations: ir.Expr, bailout: ir.Expr,
-          kind: str = "escape", offset: ir.Expr = _c(0.0), julia: Vector | None = None,
-          jacobian: bool | None = None) -> Estimate:
-    """The estimate of a hybrid: the formulas of `sequence` applied in turn
-    (each its count of times) per round, `iterations` rounds, a ray
-    stopping once |z| > bailout (checked before every step). `kind`:
-    "escape" or "linear". `julia`: c is that constant, not the point.
-    The scalar running derivative is used where every step is conformal
-    (or approximately so), unless `jacobian` asks for the Jacobian."""
-    dimensions = max(f.dimensions for f, _ in sequence)
-    c = tuple(julia) if julia is not None else (*point, *(_c(0.0),) * (dimensions - 3))
-    start = (*point, *(_c(0.0),) * (dimensions - 3))
-    steps = [f for f, count in sequence for _ in range(count)]
-    adds_point = julia is None
-    conformal = all(_apply(f, start, c)[1] is not None for f in set(steps))
-    use_scalar = conformal if jacobian is None else not jacobian
-
-    def round_(state):
-        z, dr, stopped = state[:dimensions], state[dimensions], state[dimensions + 1]
-        for formula in steps:
-            going = ir.op("and", ir.op("not", stopped), ir.op("le", ir.length(z), bailout))
-            moved, factor, _ = _apply(formula, z, c)
-            # the cap keeps bounded orbits' dr finite (their estimate is ~0 either way)
-            dr_moved = ir.op("min", ir.add(ir.mul(dr, factor), _c(1.0 if adds_point and formula.adds_c else 0.0)),
-                             _c(1e30)) if use_scalar else dr
-            z = tuple(ir.op("select", going, a, b) for a, b in zip(moved, z))
-            dr = ir.op("select", going, dr_moved, dr)
-            stopped = ir.op("not", going)
-        return (*z, dr, stopped)
-
-    final = ir.loop((*start, _c(1.0), ir.Const(0.0, ir.MASK)), iterations, round_,
-                    lambda state: ir.op("not", state[dimensions + 1]))
-    z, dr = final[:dimensions], final[dimensions]
-    if use_scalar:
-        r = ir.length(z)
-        if kind == "escape":
-            de = ir.div(ir.mul(ir.mul(_c(0.5), ir.op("log", r)), r), ir.op("abs", dr))
-            de = ir.op("select", ir.op("eq", r, _c(0.0)), _c(0.0), ir.op("min", de, _c(1e30)))
-        else:
-            de = ir.div(ir.sub(r, offset), ir.op("abs", dr))
-        return Estimate(de, True, z)
-    rebuilt, rows = derive.jacobian(z, point)
-    de = derive.escape_time_estimate(rebuilt, rows) if kind == "escape" else \
-        derive.linear_estimate(rebuilt, rows, offset)
-    return Estimate(de, False, rebuilt)

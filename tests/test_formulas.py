@@ -1,47 +1,53 @@
-"""The formula engine (fractalc/formulas.py): building blocks and their
-conformal factors, formulas and hybrids with a scalar running derivative
-or the Jacobian, against the float64 references and in the kernel."""
+"""The building blocks of formulas (fractalc/formulas.py) and their
+conformal factors; library formulas through the orbit engine
+(fractalc/formula_code.py) against the float64 references, hybrids against
+numpy and in the kernel."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+import fractalc
 import reference_fractals as ref
-from fractalc import derive, ir
+from fractalc import derive, formula_code, ir
 from fractalc import formulas as F
 from kernel_harness import evaluate_in_kernel
 
 P = ir.components(ir.Var("p", ir.VEC3))
 RNG = np.random.default_rng(7)
 ITERATIONS = ir.Const(12.0, ir.INT)
+FORMULAS = """formula bulb(power = 8) {
+    z = triplex_power(z, power) + c
+}
+formula stretched_box() {
+    z = box_fold(z, 1)
+    z = sphere_fold(z, 0.5, 1)
+    z = stretch(2 * z, (1, 1.3, 0.8)) + c
+}
+"""
 
 
-def amazing_box(scale=2.0, fold=1.0, min_radius=0.5, fixed_radius=1.0):
-    def step(z, c):
-        folded = F.box_fold(z, ir.const(fold))
-        inverted = F.sphere_fold(folded.z, ir.const(min_radius), ir.const(fixed_radius))
-        return [folded, inverted, F.scale(inverted.z, ir.const(scale))]
-    return F.Formula("amazing_box", step)
-
-
-MANDELBULB = F.Formula("mandelbulb", lambda z, c: [F.triplex_power(z, ir.const(8.0))])
+def orbit(use: str, **kwargs) -> formula_code.Orbit:
+    """The orbit of a `fractal(...)` use written in the language."""
+    shape = fractalc.loads(FORMULAS + f"scene {use}").checked.shape
+    return formula_code.orbit(shape.sequence, P, shape.iterations, shape.bailout, shape.julia, **kwargs)
 
 
 def relative(a, b):
     return np.abs(a - b) / np.maximum(np.abs(b), 1e-3)
 
 
-def test_a_mandelbox_from_blocks_is_the_contracts_mandelbox():
+def test_the_library_box_is_the_contracts_mandelbox():
     points = RNG.uniform(-2.5, 2.5, (400, 3))
-    estimate = F.orbit(P, [(amazing_box(), 1)], ITERATIONS, ir.const(1e30), kind="linear")
+    estimate = orbit("fractal(amazing_box(), iterations: 12)")
     assert estimate.scalar
     got, = ir.evaluate_at((estimate.distance,), points)
     assert np.percentile(relative(got, ref.mandelbox(points)), 99) < 1e-9
 
 
-def test_a_mandelbulb_from_blocks_is_the_contracts_mandelbulb():
+def test_a_triplex_power_formula_is_the_contracts_mandelbulb():
     points = RNG.uniform(-1.4, 1.4, (400, 3))
-    estimate = F.orbit(P, [(MANDELBULB, 1)], ITERATIONS, ir.const(2.0))
+    estimate = orbit("fractal(bulb(), iterations: 12, bailout: 2)")
     assert estimate.scalar     # the contract's scalar rule
     got, = ir.evaluate_at((estimate.distance,), points)
     assert np.percentile(relative(got, ref.mandelbulb(points)), 99) < 1e-9
@@ -85,39 +91,39 @@ def test_each_conformal_block_scales_lengths_by_its_factor(name):
 
 
 def test_a_non_conformal_formula_uses_the_jacobian():
-    stretched = F.Formula("stretched_box", lambda z, c: [*amazing_box().step(z, c),
-                                                         F.stretch(z, (ir.const(1.0), ir.const(1.3), ir.const(0.8)))])
-    assert not F.orbit(P, [(stretched, 1)], ITERATIONS, ir.const(100.0), kind="linear").scalar
+    assert not orbit("fractal(stretched_box(), bailout: 100)").scalar
 
 
 def test_on_a_conformal_julia_formula_scalar_and_jacobian_estimates_agree():
-    julia = (ir.const(0.4), ir.const(-0.3), ir.const(0.2))
-    args = dict(kind="linear", julia=julia)
-    scalar = F.orbit(P, [(amazing_box(scale=-1.5), 1)], ITERATIONS, ir.const(1e30), **args)
-    jacobian = F.orbit(P, [(amazing_box(scale=-1.5), 1)], ITERATIONS, ir.const(1e30), jacobian=True, **args)
+    use = "fractal(amazing_box(scale: -1.5), julia: (0.4, -0.3, 0.2))"
+    scalar, jacobian = orbit(use), orbit(use, jacobian=True)
     assert scalar.scalar and not jacobian.scalar
     points = RNG.uniform(-2.0, 2.0, (300, 3))
     a, b = ir.evaluate_at((scalar.distance, jacobian.distance), points)
     assert np.allclose(a, b, rtol=1e-8, atol=0)
 
 
+HYBRID = "fractal(hybrid(bulb() * 2, amazing_box()), iterations: 12)"
+
+
 def test_a_hybrid_applies_its_formulas_in_turn_with_their_counts():
-    """mandelbulb x 2 then amazing box per round, rays stopping between
-    steps: the orbit against the same rounds in numpy."""
-    hybrid = F.orbit(P, [(MANDELBULB, 2), (amazing_box(), 1)], ir.Const(4.0, ir.INT), ir.const(4.0),
-                     jacobian=True)
+    """bulb, bulb, amazing box, ... (12 steps), rays stopping between steps
+    at |z| > 4, with the scalar running derivative of each: against the
+    same steps in numpy."""
+    estimate = orbit(HYBRID)
+    assert estimate.scalar
     points = RNG.uniform(-1.5, 1.5, (200, 3))
-    values = ir.evaluate_at((hybrid.distance, *hybrid.z), points)
-    z = points.copy()
-    stopped = np.zeros(len(points), bool)
-    for _ in range(4):
-        for move in (_numpy_bulb, _numpy_bulb, _numpy_box):
-            going = ~stopped & (np.linalg.norm(z, axis=1) <= 4.0)
-            z = np.where(going[:, None], move(z) + points, z)
-            stopped = ~going
-    assert np.allclose(np.stack(values[1:], axis=1), z, rtol=1e-9, atol=1e-9)
-    distance = values[0]
-    assert np.isfinite(distance).all() and (distance[np.linalg.norm(points, axis=1) > 3.0] > 0).all()
+    got, = ir.evaluate_at((estimate.distance,), points)
+    z, dr = points.copy(), np.ones(len(points))
+    for move in (_numpy_bulb, _numpy_bulb, _numpy_box) * 4:
+        going = np.linalg.norm(z, axis=1) <= 4.0
+        moved, factor = move(z)
+        z = np.where(going[:, None], moved + points, z)
+        dr = np.where(going, np.minimum(factor * dr + 1, 1e30), dr)
+    r = np.linalg.norm(z, axis=1)
+    expected = np.where(r == 0, 0, np.minimum(0.5 * np.log(r) * r / dr, 1e30))
+    assert np.percentile(relative(got, expected), 99) < 1e-9
+    assert np.isfinite(got).all() and (got[np.linalg.norm(points, axis=1) > 3.0] > 0).all()
 
 
 def _numpy_bulb(z):
@@ -125,18 +131,19 @@ def _numpy_bulb(z):
     with np.errstate(all="ignore"):
         theta = np.where(r == 0, 0.0, np.arccos(np.clip(z[:, 2] / r, -1, 1))) * 8
     phi = np.arctan2(z[:, 1], z[:, 0]) * 8
-    return (r ** 8)[:, None] * np.stack([np.sin(theta) * np.cos(phi), np.sin(phi) * np.sin(theta), np.cos(theta)], 1)
+    direction = np.stack([np.sin(theta) * np.cos(phi), np.sin(phi) * np.sin(theta), np.cos(theta)], 1)
+    return (r ** 8)[:, None] * direction, 8 * r ** 7
 
 
 def _numpy_box(z):
     z = np.clip(z, -1, 1) * 2 - z
-    r2 = np.maximum((z * z).sum(axis=1), 1e-30)
-    return z * np.clip(1.0 / r2, 1, 4)[:, None] * 2
+    fold = np.clip(1.0 / np.maximum((z * z).sum(axis=1), 1e-30), 1, 4)
+    return z * fold[:, None] * 2, 2 * fold
 
 
 @pytest.mark.parametrize("precision, tolerance", [("float", 1e-3), ("double", 1e-9)])
 def test_a_hybrid_estimate_in_the_kernel_matches_its_float64_meaning(precision, tolerance):
-    estimate = F.orbit(P, [(MANDELBULB, 2), (amazing_box(), 1)], ir.Const(4.0, ir.INT), ir.const(4.0)).distance
+    estimate = orbit(HYBRID).distance
     points = RNG.uniform(-1.5, 1.5, (256, 3))
     out = evaluate_in_kernel(estimate, points, precision, 8)
     expected, = ir.evaluate_at((estimate,), points)
