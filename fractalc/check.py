@@ -17,7 +17,7 @@ from . import ast, formula_code, ir
 from .errors import Diagnostic, SceneError, Span, diagnostic
 from .program import (DEFAULT_MATERIAL, PROJECTIONS, STEREO_LAYOUTS, Camera, CameraPath, CheckedScene, Coloring,
                       Combination, Environment, Fog, Fractal, Glow, Keyframe, Light, Material, ParamCheck, ParamInfo,
-                      Primitive, RenderSettings, Shape, Slice, Transformed, WithMaterial)
+                      Primitive, RenderSettings, Shape, Slice, Transformed, WithMaterial, cosine_palette)
 from .resources import resource_dir
 from .stdlib import COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
 
@@ -210,7 +210,7 @@ class _Checker:
                                         constraints))
             defaults.append(value.data)
         try:
-            formula = formula_code.split(decl, self.program.file, self.program.source)
+            formula = formula_code.split(decl, self.program.file)
             formula_code.orbit((formula_code.Use(formula, tuple(defaults)),), _PROBE_POINT, ir.const(2.0))
         except formula_code.Mistake as mistake:
             self.error(mistake.span, mistake.message)
@@ -602,6 +602,10 @@ class _Checker:
             return self.math(e)
         if name in COMBINATORS:
             return self.combinator(e)
+        if name == "palette":
+            *palette, trap, scale = self.bound_args(e, COLORINGS[name], e.args)
+            start = cosine_palette(tuple(palette), ir.const(0.0))
+            return Value(COLORING, Coloring(start, start, trap, scale, tuple(palette)))
         if name in COLORINGS:
             near, far, trap, scale = self.bound_args(e, COLORINGS[name], e.args)
             return Value(COLORING, Coloring(near, far, trap, scale))

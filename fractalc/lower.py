@@ -13,7 +13,7 @@ from dataclasses import dataclass, fields
 
 from . import ir
 from .program import (DEFAULT_MATERIAL, CheckedScene, Coloring, Combination, Fractal, Material, Primitive,
-                      Shape, Transformed, WithMaterial, fold_shape)
+                      Shape, Transformed, WithMaterial, cosine_palette, fold_shape)
 from . import formula_code
 from .fractals import orbit
 from .stdlib import library
@@ -78,8 +78,11 @@ def _trap_colored(surface: Surface, coloring: Coloring, traps) -> Surface:
     """Orbit-trap colour: mix(near, far, clamp(trap * scale, 0, 1))."""
     trap = ir.op("min", traps[1], ir.op("min", traps[2], traps[3])) if coloring.trap == "planes" \
         else traps[("origin", "x", "y", "z").index(coloring.trap)]
-    t = ir.op("clamp", ir.mul(trap, coloring.scale), ir.const(0.0), ir.const(1.0))
-    rgb = tuple(ir.op("mix", a, b, t) for a, b in zip(coloring.near.items, coloring.far.items))
+    if coloring.palette is not None:
+        rgb = cosine_palette(coloring.palette, ir.mul(trap, coloring.scale)).items
+    else:
+        t = ir.op("clamp", ir.mul(trap, coloring.scale), ir.const(0.0), ir.const(1.0))
+        rgb = tuple(ir.op("mix", a, b, t) for a, b in zip(coloring.near.items, coloring.far.items))
     items = surface.items()
     return Surface(*rgb, *items[3:])
 

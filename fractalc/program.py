@@ -53,11 +53,23 @@ class Transformed:
 
 @dataclass(frozen=True)
 class Coloring:
-    """`orbit_trap(near, far, trap, scale)`: colour by the orbit trap."""
+    """`orbit_trap(near, far, trap, scale)` or `palette(a, b, c, d, trap,
+    scale)`: colour by the orbit trap. A palette's `near` and `far` are
+    its colour at t = 0 (what shapes that are not fractals show)."""
     near: ir.Vec
     far: ir.Vec
     trap: str                   # one of stdlib.TRAP_KINDS
     scale: ir.Expr
+    palette: tuple[ir.Vec, ir.Vec, ir.Vec, ir.Vec] | None = None   # a, b, c, d
+
+
+def cosine_palette(palette: tuple[ir.Vec, ir.Vec, ir.Vec, ir.Vec], t: ir.Expr) -> ir.Vec:
+    """A cosine palette's colour a + b cos(2 pi (c t + d)) (Quilez,
+    "palettes"), at least 0."""
+    def channel(a, b, c, d):
+        phase = ir.mul(ir.const(2 * math.pi), ir.add(ir.mul(c, t), d))
+        return ir.op("max", ir.add(a, ir.mul(b, ir.op("cos", phase))), ir.const(0.0))
+    return ir.Vec(tuple(channel(*items) for items in zip(*(v.items for v in palette))))
 
 
 @dataclass(frozen=True)

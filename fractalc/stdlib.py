@@ -221,6 +221,11 @@ COLORINGS = {
     "orbit_trap": Signature("coloring", "orbit_trap", (
         _p("near", "vec3", (1.0, 0.85, 0.55), "0..1000"), _p("far", "vec3", (0.15, 0.25, 0.6), "0..1000"),
         _p("trap", "word:origin|x|y|z|planes", "origin"), _p("scale", "num", 1.0, ">0"))),
+    # Quilez's cosine palette a + b cos(2 pi (c t + d)) of t = trap * scale
+    "palette": Signature("coloring", "palette", (
+        _p("a", "vec3", (0.5, 0.5, 0.5)), _p("b", "vec3", (0.5, 0.5, 0.5)), _p("c", "vec3", (1.0, 1.0, 1.0)),
+        _p("d", "vec3", (0.0, 0.33, 0.67)), _p("trap", "word:origin|x|y|z|planes", "origin"),
+        _p("scale", "num", 1.0, ">0"))),
 }
 TRAP_KINDS = ("origin", "x", "y", "z", "planes")
 

@@ -1,7 +1,8 @@
 """Looks (docs/looks.md): exposure and the tone curve of PNG output (the
 background of a scene is a known radiance, so the PNG's value of a missed
-pixel is known exactly), and spot lights in both integrators against
-their formula. Renders are 16 x 12 and 48 x 32."""
+pixel is known exactly), spot lights in both integrators against their
+formula, and cosine palettes driven by the orbit trap (read through the
+albedo pass). Renders are 16 x 12 to 48 x 32."""
 
 import math
 
@@ -142,3 +143,45 @@ def test_a_spot_light_needs_a_position_and_a_direction():
     message = str(caught.value)
     assert "a spot light needs 'direction'" in message
     assert "unknown light kind 'area' (known: directional, point, spot)" in message
+
+
+BULB = """
+param shift = 0
+scene mandelbulb(iterations: 8).color(COLORING) | sphere(0.3).translate((2, 0, 0)).color(COLORING)
+camera { position: (0, -3.2, 0.6), target: (0.3, 0, 0), fov: 50 }
+render { width: 48, height: 32, dither: 0 }
+"""
+
+
+def albedo_of(coloring: str, **build):
+    """The albedo pass, and where the fractal is (not the ball)."""
+    image = fractalc.loads(BULB.replace("COLORING", coloring), **build).render(aovs=["albedo", "P"])
+    ball = np.linalg.norm(image.passes["P"] - [2, 0, 0], axis=-1) < 0.35
+    return image.passes["albedo"].astype(float), np.isfinite(image.depth) & ~ball, ball
+
+
+@pytest.mark.parametrize("build", [{}, {"precision": "double"}])
+def test_a_cosine_palette_follows_the_orbit_trap(build):
+    # orbit_trap from black to white shows t = trap * scale itself (below 1)
+    t, fractal, _ = albedo_of("orbit_trap(near: (0, 0, 0), far: (1, 1, 1), trap: planes, scale: 2)", **build)
+    a, b, c, d = (0.5, 0.4, 0.6), (0.5, 0.3, 0.4), (0.3, 0.5, 0.7), (0.5, 0.1, 0.8)
+    palette = f"palette(a: {a}, b: {b}, c: {c}, d: {d}, trap: planes, scale: 2)"
+    colour, _, _ = albedo_of(palette, **build)
+    fractal &= t[..., 0] < 0.99
+    assert fractal.sum() > 100 and np.ptp(t[fractal][:, 0]) > 0.3
+    expected = np.add(a, np.multiply(b, np.cos(2 * np.pi * (np.multiply(c, t[fractal][:, :1]) + d))))
+    np.testing.assert_allclose(colour[fractal], np.maximum(expected, 0), atol=2e-5)
+
+
+def test_a_palette_on_a_plain_shape_is_its_colour_at_zero_and_follows_params():
+    coloring = "palette(d: (shift, 0.33, 0.67))"
+    albedo, _, ball = albedo_of(coloring)
+    assert ball.sum() > 10
+    start = 0.5 + 0.5 * np.cos(2 * np.pi * np.array([0, 0.33, 0.67]))
+    np.testing.assert_allclose(albedo[ball], np.broadcast_to(start, (ball.sum(), 3)), atol=1e-6)
+    scene = fractalc.loads(BULB.replace("COLORING", coloring), params={"shift": 0.5})
+    scene.render(aovs=["albedo"])
+    built = len(scene._programs)
+    scene.set_params({"shift": 0.25})
+    red = scene.render(aovs=["albedo"]).passes["albedo"][ball][:, 0]
+    assert np.abs(red - 0.5).max() < 1e-6 and len(scene._programs) == built
