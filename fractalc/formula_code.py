@@ -93,8 +93,7 @@ class Formula:
     step: tuple[ast.Statement, ...]
     final: tuple[ast.Statement, ...]
     span: Span
-    file: str = "<string>"          # where it is written: its mistakes are shown there
-    source: str = ""
+    file: str = "<string>"          # the file it is written in
 
     @property
     def carried(self) -> tuple[str, ...]:
@@ -114,7 +113,7 @@ class Formula:
         return any(s.name == "distance" for s in self.final) and not _calls(self.final, ESTIMATES)
 
 
-def split(decl: ast.FormulaDecl, file: str = "<string>", source: str = "") -> Formula:
+def split(decl: ast.FormulaDecl, file: str = "<string>") -> Formula:
     """The formula's statements by phase; a misplaced one is a Mistake."""
     phases: dict[str, list] = {"init": [], "step": [], "final": []}
     for statement in decl.body:
@@ -124,7 +123,7 @@ def split(decl: ast.FormulaDecl, file: str = "<string>", source: str = "") -> Fo
             if isinstance(inner, ast.Assign) and inner.phase != "step":
                 raise Mistake(inner.span, f"'{inner.phase}' goes at the top of a formula, not inside 'if'")
     return Formula(decl.name, tuple(p.name for p in decl.params), tuple(phases["init"]),
-                   tuple(phases["step"]), tuple(phases["final"]), decl.span, file, source)
+                   tuple(phases["step"]), tuple(phases["final"]), decl.span, file)
 
 
 def _nested(statement) -> list:
@@ -175,6 +174,7 @@ def _names(statements) -> set:
 
 def _calls(statements, names) -> bool:
     return any(isinstance(e, ast.Call) and e.name in names for e in _expressions(statements))
+
 
 class Interpreter:
     """Runs statements on an environment of Values (names -> Value).
@@ -401,23 +401,17 @@ class Function:
                 words = {"n": "a number", "3": "a 3-vector", "4": "a 4-vector", "m": "a comparison",
                          "v": "a vector", "any": "a number or a vector"}
                 raise Mistake(arg.span, f"'{e.name}' needs {words[want]} here ({self.about}), this is {_word(v)}")
-        _CURRENT_CALL[0] = e.span
         try:
-            return self.compute(*values)
+            return self.compute(e.span, *values)
         except (ValueError, ZeroDivisionError, OverflowError):
             raise Mistake(e.span, f"'{e.name}' is undefined for these values") from None
-        finally:
-            _CURRENT_CALL[0] = None
 
 
-_CURRENT_CALL: list = [None]     # the call being computed: where an underivable operation is
-
-
-def _block(make: Callable, conformal_args: int = 1, degree: Callable | None = None):
+def _block(make: Callable, degree: Callable | None = None):
     """A building block of formulas.py as a function: its result keeps z's
     form times the block's factor where the block has one and its other
     arguments do not depend on the point."""
-    def compute(z: Value, *rest: Value):
+    def compute(span: Span, z: Value, *rest: Value):
         block = make(z.items, *(r.items if r.type in VECTOR_TYPES else r.items[0] for r in rest))
         others_independent = all(r.independent for r in rest)
         form = _scaled_form(z.form, block.factor) if block.factor is not None and others_independent else None
@@ -436,16 +430,16 @@ def _power_degree(rest):
 
 def _map(name: str, degree: Callable[[list[float]], float], derivable: bool = True):
     """A function of numbers applied per component (numbers broadcast)."""
-    def compute(*values: Value):
+    def compute(span: Span, *values: Value):
         size = max(len(v.items) for v in values)
         lanes = [v.items * size if v.type == "num" else v.items for v in values]
-        if any(len(l) != size for l in lanes):
-            raise ValueError("sizes")
+        if any(len(lane) != size for lane in lanes):
+            raise Mistake(span, f"'{name}' on vectors of different sizes")
         items = tuple(ir.op(name, *args) for args in zip(*lanes))
         independent = all(v.independent for v in values)
         underivable = next((v.underivable for v in values if v.underivable), None)
         if not derivable and not independent:
-            underivable = underivable or _CURRENT_CALL[0]
+            underivable = underivable or span
         form = INDEPENDENT if independent else None
         if name == "abs" and size > 1 and values[0].form is not None:
             form = values[0].form              # the octant fold: lengths kept
@@ -454,10 +448,10 @@ def _map(name: str, degree: Callable[[list[float]], float], derivable: bool = Tr
     return compute
 
 
-def _select(condition: Value, a: Value, b: Value) -> Value:
+def _select(span: Span, condition: Value, a: Value, b: Value) -> Value:
     """Per component, both sides computed (cheap ones; 'if' computes only the side a ray needs)."""
     if a.type != b.type:
-        raise ValueError("types")
+        raise Mistake(span, f"'select' chooses between values of one type, not {_word(a)} and {_word(b)}")
     forms = a.form is not None and b.form is not None
     form = tuple(ir.op("select", condition.items[0], x, y) for x, y in zip(a.form, b.form)) if forms else None
     if forms and all(ir.is_const(x) and x.value == 0.0 for x in form):
@@ -467,7 +461,7 @@ def _select(condition: Value, a: Value, b: Value) -> Value:
 
 
 def _vector_fn(function: Callable, result: str):
-    def compute(*values: Value):
+    def compute(span: Span, *values: Value):
         items = function(*(v.items for v in values))
         items = items if isinstance(items, tuple) else (items,)
         return replace(_dependent_scalar(max(v.degree for v in values) * (2 if function is ir.dot else 1), *values),
@@ -485,7 +479,7 @@ def _cross(a, b):
             ir.sub(ir.mul(a[0], b[1]), ir.mul(a[1], b[0])))
 
 
-def _quaternion_multiply(a: Value, b: Value) -> Value:
+def _quaternion_multiply(span: Span, a: Value, b: Value) -> Value:
     items = formulas.quaternion_multiply(a.items, b.items)
     form = None
     if a.independent and b.independent:
@@ -496,7 +490,9 @@ def _quaternion_multiply(a: Value, b: Value) -> Value:
     return Value("vec4", items, form, a.degree + b.degree, a.underivable or b.underivable)
 
 
-def _smooth(name):
+def _growth(name):
+    """How a function of numbers grows with z: like its arguments (piecewise-linear ones), half as fast
+    (sqrt) or faster than any power (the transcendental ones)."""
     return lambda d: max(d) if name in ("abs", "min", "max", "clamp", "mix") else \
         (max(d) / 2 if name == "sqrt" else math.inf)
 
@@ -521,16 +517,16 @@ FUNCTIONS: dict[str, Function] = {
                                   "quaternion_square(q)"),
     "quaternion_multiply": Function(("4", "4"), _quaternion_multiply, "quaternion_multiply(a, b)"),
     # math
-    **{name: Function(("any",), _map(name, _smooth(name)), f"{name}(x)")
+    **{name: Function(("any",), _map(name, _growth(name)), f"{name}(x)")
        for name in ("sin", "cos", "tan", "asin", "acos", "atan", "sqrt", "rsqrt", "abs", "exp", "log", "radians",
                     "degrees")},
     **{name: Function(("any",), _map(name, lambda d: 0.0, derivable=False), f"{name}(x)") for name in ("floor", "round")},
-    "atan2": Function(("any", "any"), _map("atan2", _smooth("atan2")), "atan2(y, x)"),
-    "min": Function(("any", "any"), _map("min", _smooth("min")), "min(a, b)"),
-    "max": Function(("any", "any"), _map("max", _smooth("max")), "max(a, b)"),
+    "atan2": Function(("any", "any"), _map("atan2", _growth("atan2")), "atan2(y, x)"),
+    "min": Function(("any", "any"), _map("min", _growth("min")), "min(a, b)"),
+    "max": Function(("any", "any"), _map("max", _growth("max")), "max(a, b)"),
     "pow": Function(("any", "any"), _map("pow", lambda d: math.inf), "pow(x, y)"),
-    "clamp": Function(("any", "any", "any"), _map("clamp", _smooth("clamp")), "clamp(x, low, high)"),
-    "mix": Function(("any", "any", "any"), _map("mix", _smooth("mix")), "mix(a, b, t)"),
+    "clamp": Function(("any", "any", "any"), _map("clamp", _growth("clamp")), "clamp(x, low, high)"),
+    "mix": Function(("any", "any", "any"), _map("mix", _growth("mix")), "mix(a, b, t)"),
     "select": Function(("m", "any", "any"), _select, "select(condition, if_true, if_false)"),
     "length": Function(("v",), _vector_fn(ir.length, "num"), "length(v)"),
     "dot": Function(("v", "v"), _vector_fn(ir.dot, "num"), "dot(a, b)"),
