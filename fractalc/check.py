@@ -813,6 +813,8 @@ class _Checker:
                     self.error(decl.span, f"a {decl.kind} light needs '{key}'")
             return None
         vector = found.pop(vector_key)
+        if decl.kind == "sphere":    # the direct renderer's stand-in for its soft shadow
+            found.setdefault("shadows", "soft")
         return Light(decl.kind, vector, **found)
 
     def render(self, decl: ast.RenderDecl | None) -> RenderSettings:
@@ -930,7 +932,8 @@ _LIGHT_COMMON = (_P("color", "vec3", None, ">=0"), _P("intensity", "num", None, 
 LIGHT_KEYS = {"directional": _keys(_P("direction", "vec3", None, "nonzero"), *_LIGHT_COMMON),
               "point": _keys(_P("position", "vec3"), *_LIGHT_COMMON),
               "spot": _keys(_P("position", "vec3"), _P("direction", "vec3", None, "nonzero"), *_LIGHT_COMMON,
-                            _P("angle", "num", None, ">0", "<180"), _P("falloff", "num", None, ">=0", "<=180"))}
+                            _P("angle", "num", None, ">0", "<180"), _P("falloff", "num", None, ">=0", "<=180")),
+              "sphere": _keys(_P("position", "vec3"), _P("radius", "num", None, ">0"), *_LIGHT_COMMON)}
 BLOCK_KEYS = {
     "block:glow": (_keys(_P("color", "vec3", None, ">=0"), _P("strength", "num", None, ">=0"),
                          _P("radius", "num", None, ">0")), Glow()),

@@ -10,7 +10,7 @@ from dataclasses import replace
 from .program import CheckedScene
 from .resources import resource_dir
 
-LIGHT_KINDS = {"directional": 0, "point": 1, "spot": 3}
+LIGHT_KINDS = {"directional": 0, "point": 1, "spot": 3, "sphere": 4}
 HEADLIGHT = 2          # no lights in the scene: a light at the eye
 LIGHT_STRIDE = 13      # numbers per light in the kernel's LIGHTS table
 MAX_IRRADIANCE = 1e20  # light values stay within float's range
@@ -35,9 +35,10 @@ def lights_table(scene: CheckedScene) -> list[list[float]]:
             vector = tuple(-c / length for c in vector)
         length = math.sqrt(sum(c * c for c in light.direction))
         inner, outer = light.cone_cosines()
+        # a spot's cone cosines, or a sphere light's radius
+        cone = (light.radius, 0.0) if light.kind == "sphere" else (outer, max(inner, outer + 1e-6))
         rows.append(_light_row(LIGHT_KINDS[light.kind], vector, light.color, light.intensity,
-                               light.shadows != "none", tuple(c / length for c in light.direction),
-                               (outer, max(inner, outer + 1e-6))))
+                               light.shadows != "none", tuple(c / length for c in light.direction), cone))
     if not rows and scene.render.environment is None:   # nothing lights the scene: a headlight
         rows.append(_light_row(HEADLIGHT, (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 1.0, True))
     return rows

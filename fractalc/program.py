@@ -165,6 +165,7 @@ class Light:
     direction: Vector3 = (0.0, 0.0, -1.0)   # spot: the cone's axis, the way it points
     angle: float = 30.0         # spot: full brightness within this angle of the axis, degrees
     falloff: float = 10.0       # spot: then fading to none over this many degrees more
+    radius: float = 0.25        # sphere: the light's radius
 
     def cone_cosines(self) -> tuple[float, float]:
         """A spot's cosines of the angle where its light starts fading

@@ -6,12 +6,14 @@
 //   ENVIRONMENT_ZENITH_R .. ENVIRONMENT_GROUND_B   the sky's radiance
 //   CAMERA_SEES_ENVIRONMENT 1, or 0 with a transparent background
 //   LIGHT_COUNT, LIGHTS[]   LIGHT_STRIDE numbers per light: kind (0
-//                           directional, 1 point, 2 the headlight, 3 spot),
+//                           directional, 1 point, 2 the headlight, 3 spot,
+//                           4 sphere),
 //                           its direction toward the light or its position,
 //                           irradiance (pi colour intensity: a white diffuse
 //                           surface facing it shows colour intensity, as in
 //                           the direct renderer), shadows (1 or 0), a
-//                           spot's axis and its cone's outer and inner cosines
+//                           spot's axis and its cone's outer and inner
+//                           cosines, or a sphere's radius (at 11)
 // Paths scatter off surfaces in a loop (no recursion): at each hit, light
 // from every light by next-event estimation (shadow rays), then one new
 // direction sampled from the surface's lobes; the environment is reached by
@@ -67,9 +69,12 @@ real ggx_brdf(vec3 n, vec3 to_light, vec3 to_eye, real alpha) {
 }
 
 // Light arriving at p from every light, reflected toward the eye:
-// next-event estimation with a shadow ray per light that casts shadows.
+// next-event estimation with a shadow ray per light that casts shadows
+// (a sphere light's toward a point of it drawn with random dimensions
+// `first + 2 i` and `first + 2 i + 1`).
 vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albedo, real diffuse_weight,
-                  real glossy_weight, real alpha, mask active, scalar pixel_angle, __constant scalar *params) {
+                  real glossy_weight, real alpha, mask active, lane_uint key, uint first, scalar pixel_angle,
+                  __constant scalar *params) {
     vec3 total = v3((real)0.0f, 0.0f, 0.0f);
     for (int i = 0; i < LIGHT_COUNT; i++) {
         __constant scalar *light = LIGHTS + i * LIGHT_STRIDE;
@@ -86,6 +91,20 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
             if (light[0] == 3.0f)   // a spot's cone: smoothstep across its falloff
                 falloff = falloff * smoothstep(light[11], light[12],
                                                -v3_dot(to_light, v3(light[8], light[9], light[10])));
+            if (light[0] == 4.0f) {
+                // a sphere light of radiance irradiance / (pi r^2): a direction
+                // uniform in the cone the sphere fills, weighted by the cone's
+                // solid angle 2 pi (1 - cos_max) (1 / d^2 from afar, as a point)
+                scalar radius = light[11];
+                real sin2 = fmin(radius * radius / (reach * reach), 1.0f);
+                real cos_max = sqrt(1.0f - sin2);
+                real cos_t = 1.0f - sample_random(key, first + 2u * (uint)i) * (1.0f - cos_max);
+                real sin_t = sqrt(max(1.0f - cos_t * cos_t, 0.0f));
+                real angle = 6.283185307179586f * sample_random(key, first + 2u * (uint)i + 1u);
+                falloff = SELECT(2.0f * (1.0f - cos_max) / (radius * radius), (real)0.0f, reach <= radius);
+                reach = reach * cos_t - sqrt(max(radius * radius - reach * reach * sin_t * sin_t, 0.0f));
+                to_light = around_normal(to_light, v3(sin_t * cos(angle), sin_t * sin(angle), cos_t));
+            }
         }
         real cosine = v3_dot(n, to_light);
         mask lit = active & (cosine > 0.0f);
@@ -131,7 +150,8 @@ vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel
         real alpha = max(sqrt(2.0f / (s.shininess + 2.0f)), SMALLEST_ROUGHNESS);
         vec3 lifted = v3_add(p, v3_scale(n, 2.0f * hit_threshold(travelled, pixel_angle)));
         radiance = v3_add(radiance, v3_mul(throughput, direct_light(p, lifted, n, to_eye, eye, albedo, diffuse_weight,
-                                                                     glossy_weight, alpha, active, pixel_angle, params)));
+                                                                     glossy_weight, alpha, active, key,
+                                                                     1000u + (uint)bounce * 64u, pixel_angle, params)));
         // one lobe, chosen by its weight, samples the next direction; the
         // throughput takes the lobe's f cos / pdf (its weight cancels)
         uint first = (uint)bounce * 4u + 1u;

@@ -231,3 +231,65 @@ def test_denoising_a_path_traced_image_brings_it_nearer_the_converged_one():
     assert error["denoised"] < error["noisy"] / 1.5, error
     assert np.array_equal(denoised.rgba[..., 3], noisy.rgba[..., 3]) and "albedo" in denoised.passes
     assert denoised.metadata["denoised"].startswith("Intel Open Image Denoise")
+
+
+AREA = f"""
+material floor {{ color: (0.6, 0.6, 0.6), specular: 0 }}
+scene OCCLUDER plane().material(floor)
+camera {{ position: (0, -2.5, 2.5), target: (0, 0, 0), fov: 50 }}
+light sphere {{ position: (0.1, 0.2, 2), radius: 0.3, intensity: 4, color: (1, 0.9, 0.7) }}
+render {{ width: 32, height: 24, integrator: path, bounces: 1, epsilon: 1e-5, {DARK} }}
+"""
+
+
+def test_a_sphere_light_lights_a_plane_like_a_point_light_at_its_centre():
+    # a sphere wholly above a surface gives it the irradiance of a point
+    # of the same power at its centre: albedo * colour * intensity * cos / d^2
+    image = fractalc.loads(AREA.replace("OCCLUDER", "")).render(samples=64, aovs=["P"])
+    offset = np.array([0.1, 0.2, 2]) - image.passes["P"].astype(float)
+    distance = np.linalg.norm(offset, axis=-1)
+    expected = 0.6 * 4 * (offset[..., 2] / distance) / distance ** 2
+    near = image.depth < 3.4
+    assert near.sum() > 200
+    np.testing.assert_allclose(image.rgba[..., 0][near], expected[near], rtol=0.02)
+    np.testing.assert_allclose(image.rgba[..., 2][near], 0.7 * expected[near], rtol=0.02)
+
+
+def test_a_sphere_light_casts_the_penumbra_of_the_part_of_it_an_edge_hides():
+    # a thin plate over x < 0 at height 0.8: each floor point sees the
+    # light's disc (angular radius a) cut by the plate's edge, whose great
+    # circle passes at angular distance b from the disc's centre; the
+    # visible fraction is 1 - (acos(s) - s sqrt(1 - s^2)) / pi, s = b / a
+    plate = "box((4, 6, 0.004)).translate((-2, 0, 0.8)) |"
+    keys = {"samples": 1024, "seed": 3, "width": 48, "height": 36,   # under the plate, looking down
+            "camera": fractalc.Camera(position=(-0.07, 0.2, 0.5), target=(-0.07, 0.2, 0), fov=90)}
+    lit = fractalc.loads(AREA.replace("OCCLUDER", "")).render(aovs=["P"], **keys)
+    shaded = fractalc.loads(AREA.replace("OCCLUDER", plate)).render(**keys)
+    p = lit.passes["P"].astype(float)
+    floor = (np.abs(p[..., 2]) < 1e-3) & (np.abs(shaded.depth - lit.depth) < 1e-4)
+    # pixels all of whose samples see the floor: not beside the plate
+    floor = floor & np.all([np.roll(floor, shift, axis) for shift in (-1, 1) for axis in (0, 1)], axis=0)
+    floor &= (p[..., 0] > -2) & (np.abs(p[..., 1]) < 2)     # where only the plate's edge at x = 0 matters
+    centre, radius = np.array([0.1, 0.2, 2]), 0.3
+    edge = np.stack([np.zeros_like(p[..., 0]), p[..., 1], np.full_like(p[..., 0], 0.8)], axis=-1)
+    normal = np.cross(edge - p, [0, 1, 0])
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+    towards = centre - p
+    side = np.sign(np.sum(normal * (edge + [1, 0, 0] - p), axis=-1))     # the side the plate leaves open
+    b = np.arcsin(side * np.sum(normal * towards, axis=-1) / np.linalg.norm(towards, axis=-1))
+    s = np.clip(b / np.arcsin(radius / np.linalg.norm(towards, axis=-1)), -1, 1)
+    expected = 1 - (np.arccos(s) - s * np.sqrt(1 - s * s)) / np.pi
+    seen = shaded.rgba[..., 0][floor] / lit.rgba[..., 0][floor]
+    penumbra = (expected[floor] > 0.05) & (expected[floor] < 0.95)
+    assert penumbra.sum() > 200 and (expected[floor] == 0).sum() > 200 and (expected[floor] == 1).sum() > 200
+    assert np.abs(seen - expected[floor]).mean() < 0.02
+    assert np.abs(seen - expected[floor]).max() < 0.1
+    assert np.all(seen[expected[floor] == 0] == 0) and np.all(seen[expected[floor] == 1] > 0.99)
+
+
+def test_the_direct_renderer_lights_with_a_sphere_as_a_point_with_soft_shadows():
+    text = AREA.replace("OCCLUDER", "sphere(0.3).translate((0, 0, 0.6)) |").replace("integrator: path, ", "")
+    sphere = fractalc.loads(text).render()
+    point = fractalc.loads(text.replace("light sphere { position: (0.1, 0.2, 2), radius: 0.3,",
+                                        "light point { position: (0.1, 0.2, 2), shadows: soft,")).render()
+    assert np.array_equal(sphere.rgba, point.rgba)
