@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -306,3 +307,42 @@ def test_hard_cases_are_finite(name, precision):
     for values in _range_ends(case):
         d = kernel_distance(name, hard_points(case), precision, values)
         assert np.isfinite(d).all(), f"params {values}: {d}"
+
+
+# ---------------------------------------------------------------- the examples
+
+REPO = Path(__file__).resolve().parent.parent
+EXAMPLES = sorted((REPO / "examples" / "formulas").glob("*.frac"))
+
+
+def _fractal(path):
+    import fractalc
+    shape = fractalc.load(path).checked.shape
+    while not hasattr(shape, "sequence"):       # under its material and colouring
+        shape = shape.shape
+    return shape
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
+def test_each_examples_bound_holds_its_fractal(path):
+    """Beyond `bound: R` (R to 1.5 R) the estimate (float64 IR, no bound)
+    stays above the surface level of `check --de` (1e-5 R): no surface is cut."""
+    shape = _fractal(path)
+    radius = shape.bound.value
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(300, 3))
+    points *= radius * rng.uniform(1, 1.5, (300, 1)) / np.linalg.norm(points, axis=1, keepdims=True)
+    distance = formula_code.orbit(shape.sequence, POINT, shape.iterations, shape.bailout, shape.julia).distance
+    d, = ir.evaluate_at((distance,), points)
+    assert d.min() > 1e-5 * radius
+
+
+def test_the_docs_table_lists_every_library_formula_with_its_example_and_image():
+    text = (REPO / "docs" / "formulas.md").read_text()
+    for name, _ in check.library_formulas():
+        if not name.endswith("_formula"):
+            assert f"| `{name}(" in text, name
+    for path in EXAMPLES:
+        assert f"(../examples/formulas/{path.name})" in text, path.name
+        assert f"(gallery/formulas/{path.stem}.png)" in text, path.stem
+        assert (REPO / "docs" / "gallery" / "formulas" / f"{path.stem}.png").is_file(), path.stem
