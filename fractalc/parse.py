@@ -5,6 +5,7 @@ from __future__ import annotations
 import gc
 import re
 from array import array
+from dataclasses import replace
 from functools import lru_cache
 from itertools import islice
 from sys import intern
@@ -252,7 +253,8 @@ def _expected_words(expected) -> str:
     return ", ".join(words)
 
 
-def _syntax_message(error: UnexpectedInput) -> str:
+def _syntax_message(error: UnexpectedInput, before: str = "") -> str:
+    """What went wrong; `before` is the text of the error's line before it."""
     if isinstance(error, UnexpectedCharacters):
         return f"unexpected character '{error.char}'"
     if isinstance(error, UnexpectedEOF):
@@ -264,6 +266,10 @@ def _syntax_message(error: UnexpectedInput) -> str:
         return f"missing ',' or new line before '{token}' (block entries are separated by commas or new lines)"
     if token.type == "$END":
         return f"unexpected end of the file, expected {_expected_words(expected)}"
+    if token.type == "COMPARE":
+        return f"unexpected '{token}': comparisons do not chain (join them with '&': 'a < b & b < c')"
+    if token.type == "LBRACE" and re.search(r"(^|\W)else\s*$", before):
+        return "'else' goes on the line of the '}' that ends its 'if' ('} else {')"
     return f"unexpected {_describe(token)}, expected {_expected_words(expected)}"
 
 
@@ -277,9 +283,11 @@ class _Stop(Exception):
 # name, a number, a punctuation mark or a new line; group 4 is the end of the
 # text and group 5 any other character (an error).
 _FAST_TOKEN = re.compile(r"(?:[ \t\r\f]+|#[^\n]*)*(?:([A-Za-z_][A-Za-z0-9_]*)|((?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)"
-                         r"|([-+*/|&(){}\[\],:=.\n])|(\Z)|(.))", re.S)
-_DECL_WORDS = frozenset({"param", "let", "material", "scene", "camera", "light", "render", "path"})
-_PRECEDENCE = {"|": 1, "&": 2, "+": 3, "-": 3, "*": 4, "/": 4}
+                         r"|(<=|>=|==|!=|[-+*/|&(){}\[\],:=.<>\n])|(\Z)|(.))", re.S)
+_DECL_WORDS = frozenset({"param", "let", "material", "scene", "camera", "light", "render", "path", "formula"})
+_COMPARISONS = frozenset({"<", "<=", ">", ">=", "==", "!="})
+_PRECEDENCE = {"|": 1, "&": 2, **{c: 2.5 for c in _COMPARISONS}, "+": 3, "-": 3, "*": 4, "/": 4}
+_STATEMENT_WORDS = frozenset({"init", "final", "if", "else"})     # keywords where a statement starts
 _SEPARATORS = frozenset({",", "\n"})
 # The fast parser hands anything this deep to Lark, which reports the
 # nesting limit exactly where it is passed.
@@ -410,18 +418,20 @@ class _FastParser:
             shape = self.expr()
             return ast.SceneDecl(shape, keyword.to(self.outer))
         if word == "param":
+            param = self.param()
+            return replace(param, span=keyword.to(param.span))
+        if word == "formula":
             name, name_span = self.name()
-            self.expect("=")
-            default = self.expr()
-            end, bounds = self.outer, None
-            if self.kinds[self.i] == "name" and self.texts[self.i] == "in":
+            self.open("(")
+            params = []
+            while self.kinds[self.i] != ")":
+                params.append(self.param())
+                if self.kinds[self.i] != ",":
+                    break
                 self.i += 1
-                self.open("[")
-                low = self.expr()
-                self.expect(",")
-                high = self.expr()
-                end, bounds = self.close("]"), (low, high)
-            return ast.ParamDecl(name, name_span, default, bounds, keyword.to(end))
+            self.close(")")
+            body, end = self.separated(self.statement)
+            return ast.FormulaDecl(name, name_span, tuple(params), body, keyword.to(end))
         if word == "material" or word == "light":
             name, name_span = self.name()
             block = self.block()
@@ -433,6 +443,52 @@ class _FastParser:
         block = self.block()
         node = ast.CameraDecl if word == "camera" else ast.RenderDecl
         return node(block, keyword.to(block.span))
+
+    def param(self) -> ast.ParamDecl:
+        """`NAME = EXPR [in [LOW, HIGH]]`, spanning from the name."""
+        name, name_span = self.name()
+        self.expect("=")
+        default = self.expr()
+        end, bounds = self.outer, None
+        if self.kinds[self.i] == "name" and self.texts[self.i] == "in":
+            self.i += 1
+            self.open("[")
+            low = self.expr()
+            self.expect(",")
+            high = self.expr()
+            end, bounds = self.close("]"), (low, high)
+        return ast.ParamDecl(name, name_span, default, bounds, name_span.to(end))
+
+    def statement(self):
+        """A formula's statement: `[init|final] NAME = EXPR` or an `if`."""
+        word = self.texts[self.i] if self.kinds[self.i] == "name" else None
+        if word == "if":
+            return self.if_statement()
+        phase, start = "step", None
+        if word in ("init", "final"):
+            phase, start = word, self.span(self.i)
+            self.i += 1
+        elif word in _STATEMENT_WORDS:
+            raise _Stop
+        name, name_span = self.name()
+        self.expect("=")
+        value = self.expr()
+        return ast.Assign(name, name_span, value, phase, (start or name_span).to(self.outer))
+
+    def if_statement(self) -> ast.If:
+        start = self.span(self.i)
+        self.i += 1
+        condition = self.expr()
+        then, end = self.separated(self.statement)
+        otherwise = ()
+        if self.kinds[self.i] == "name" and self.texts[self.i] == "else":
+            self.i += 1
+            if self.kinds[self.i] == "name" and self.texts[self.i] == "if":
+                nested = self.if_statement()
+                otherwise, end = (nested,), nested.span
+            else:
+                otherwise, end = self.separated(self.statement)
+        return ast.If(condition, then, otherwise, start.to(end))
 
     def separated(self, item) -> tuple[tuple, Span]:
         """`{ item, item ... }`, items separated by commas or new lines: the
@@ -480,17 +536,21 @@ class _FastParser:
         if precedence is None:
             return node
         operands, outers, depths, operators = [node], [self.outer], [self.depth], []
+        bare = [False]        # whether each operand is a comparison not in brackets (they do not chain)
         while True:
             while operators and (precedence is None or operators[-1][0] >= precedence):
                 right, left, op = operands.pop(), operands.pop(), operators.pop()[1]
                 right_outer = outers.pop()
                 span = outers.pop().to(right_outer)
                 depth = max(depths.pop(), depths.pop()) + 1
-                if depth > _FAST_DEPTH:
+                left_bare = bare.pop(-2)
+                bare.pop()
+                if depth > _FAST_DEPTH or (op in _COMPARISONS and left_bare):
                     raise _Stop
                 operands.append(ast.Binary(op, left, right, span))
                 outers.append(span)
                 depths.append(depth)
+                bare.append(op in _COMPARISONS)
             if precedence is None:
                 self.depth, self.outer = depths[0], outers[0]
                 return operands[0]
@@ -499,6 +559,7 @@ class _FastParser:
             operands.append(self.operand())
             outers.append(self.outer)
             depths.append(self.depth)
+            bare.append(False)
             precedence = _PRECEDENCE.get(kinds[self.i])
 
     def operand(self):
@@ -549,6 +610,10 @@ class _FastParser:
         while kinds[self.i] == ".":
             self.i += 1
             name, name_span = self.name()
+            if kinds[self.i] != "(":          # a component: v.x
+                node, depth = ast.Field(node, name, name_span, outer.to(name_span)), depth + 1
+                outer = node.span
+                continue
             self.open("(")
             args = self.arguments()
             node = ast.Method(node, name, name_span, args, outer.to(self.close(")")))
@@ -642,8 +707,9 @@ def _lark_parse(source: str, text: str, path: str, start: int) -> tuple:
             last = len(lines) - (len(lines) > 1 and lines[-1] == "")   # the line a final break ends
             raise SceneError([diagnostic(path, text, Span(last, len(lines[last - 1]) + 1, last,
                                                           len(lines[last - 1]) + 2), _syntax_message(error))])
+        line = source[start:].split("\n")[error.line - 1]
         fail(Span(error.line, error.column, error.line, error.column + len(str(token or " "))),
-             _syntax_message(error))
+             _syntax_message(error, line[:error.column - 1]))
     except _NestingError as error:
         where = error.token
         fail(_span(where.meta if isinstance(where, Tree) else where), f"nesting deeper than {MAX_NESTING} levels")

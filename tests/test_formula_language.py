@@ -72,6 +72,10 @@ MISTAKES = [
     ("formula f() {\n    z = z * log(0) + c\n}\nscene fractal(f())", "2:13", "'log' is undefined for these values"),
     (DOUBLE + "scene f() | sphere(1)", "4:7", "this is a formula: make it a shape with 'fractal("),
     (DOUBLE + "scene f()", "4:7", "'scene' needs a shape, this is a formula"),
+    ("formula f() {\n    if z.x < 0 { z = z }\n    else { z = -z }\n    z = z + c\n}\nscene fractal(f())", "3:10",
+     "'else' goes on the line of the '}' that ends its 'if'"),
+    ("formula f() {\n    stop = z.x < 1 < 2\n    z = z + c\n}\nscene fractal(f())", "2:20",
+     "comparisons do not chain"),
 ]
 
 

@@ -13,7 +13,8 @@ import fractalc
 from fractalc import parse as parse_module
 from fractalc.parse import parse
 
-EXAMPLES = sorted(glob.glob(os.path.join(os.path.dirname(__file__), "..", "examples", "*.frac")))
+EXAMPLES = sorted(glob.glob(os.path.join(os.path.dirname(__file__), "..", "examples", "*.frac"))
+                  + glob.glob(os.path.join(os.path.dirname(__file__), "..", "stdlib_frac", "*.frac")))
 
 
 def flat_union(size: int) -> str:
@@ -55,6 +56,11 @@ TRICKY = [
     "render {\n\n a: 1,\n\n b: f(1,\n 2) , , c: { d: 1\n e: -2 }\n}\nscene a\n| b\n",
     "param p = -1e3 in [-.5, 2.] path { , 0: { fov: 1 }\n 1.5: {}, }\nscene a * b / c + d - e & f | g",
     "scene a\r\nlet b = 1\rlet c = 2  # comment\n",
+    # formulas: statements by phase, else if, comparisons between & and +, components
+    "formula f(a = 1 in [0, 2], b = (1, 2, 3)) {\n init k = 1\n if z.x < 0 & (z.y >= 1) | k == 2 { z = -z }"
+    " else if (k != 1) < 3 {\n  z = z.xyz * k\n } else { k = k * 2 }\n z = (z, 1).xzy + c\n"
+    " final distance = length(z) / k\n}\nscene fractal(f(), iterations: 3)",
+    "formula g() {\n\n z = ((z)).x * (z.y) + c, final distance = 1\n}\nscene fractal(g())",
 ]
 
 
@@ -111,4 +117,4 @@ def test_a_keyword_run_into_a_name_is_a_name():
     with pytest.raises(fractalc.SceneError) as error:
         parse("letb = 1\nscene b")
     assert (error.value.line, error.value.column) == (1, 1)
-    assert error.value.message.startswith("unexpected 'letb', expected 'camera', 'let'")
+    assert error.value.message.startswith("unexpected 'letb', expected 'camera', 'formula', 'let'")
