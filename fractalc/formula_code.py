@@ -423,6 +423,13 @@ def _block(make: Callable, degree: Callable | None = None):
     return compute
 
 
+def _box_fold(span: Span, z: Value, limit: Value) -> Value:
+    if limit.type != "num" and len(limit.items) != len(z.items):
+        raise Mistake(span, f"'box_fold' needs one limit or {len(z.items)} (one per axis of z), "
+                            f"not {len(limit.items)}")
+    return _block(formulas.box_fold)(span, z, limit)
+
+
 def _power_degree(rest):
     power = rest[0].items[0]
     return power.value if ir.is_const(power) else math.inf
@@ -499,7 +506,7 @@ def _growth(name):
 
 FUNCTIONS: dict[str, Function] = {
     # building blocks (formulas.py), each with its derivative rule
-    "box_fold": Function(("v", "n"), _block(formulas.box_fold), "box_fold(z, limit)"),
+    "box_fold": Function(("v", "any"), _box_fold, "box_fold(z, limit or limits)"),
     "sphere_fold": Function(("v", "n", "n"), _block(formulas.sphere_fold),
                             "sphere_fold(z, min_radius, fixed_radius)"),
     "sphere_invert": Function(("v", "n"), _block(formulas.sphere_invert), "sphere_invert(z, radius)"),

@@ -41,9 +41,12 @@ def _scaled(z: Vector, s: ir.Expr) -> Vector:
 
 # ---- building blocks ------------------------------------------------------------
 
-def box_fold(z: Vector, limit: ir.Expr) -> Block:
-    """Each coordinate beyond +-limit reflected back inside (Tom Lowe)."""
-    return Block(tuple(ir.sub(ir.mul(ir.op("clamp", c, ir.neg(limit), limit), _c(2.0)), c) for c in z), _c(1.0))
+def box_fold(z: Vector, limit: ir.Expr | Vector) -> Block:
+    """Each coordinate beyond +-limit reflected back inside (Tom Lowe); a
+    vector of limits folds each axis at its own."""
+    limits = limit if isinstance(limit, tuple) else (limit,) * len(z)
+    return Block(tuple(ir.sub(ir.mul(ir.op("clamp", c, ir.neg(k), k), _c(2.0)), c) for c, k in zip(z, limits)),
+                 _c(1.0))
 
 
 def sphere_fold(z: Vector, min_radius: ir.Expr, fixed_radius: ir.Expr) -> Block:

@@ -261,3 +261,20 @@ def test_an_underivable_step_is_allowed_with_the_formulas_own_estimate():
     p = np.array([[0.25, 1.5, -0.75]])
     z = (p - np.floor(p)) * 2 + p
     np.testing.assert_allclose(fractalc.loads(text).distance(p), np.linalg.norm(z, axis=1) - 1, rtol=1e-5)
+
+
+def test_a_box_fold_with_a_limit_per_axis_keeps_the_scalar_derivative():
+    """box_fold(z, (1, 0.5, 1e6)): x folded at 1, y at 0.5, z never (Amazing
+    Surf's fold), still a similarity: against numpy."""
+    text = ("formula surf() {\n    z = box_fold(z, (1, 0.5, 1000000))\n    z = 2 * z + c\n}\n"
+            "scene fractal(surf(), iterations: 4)")
+    shape = fractalc.loads(text).checked.shape
+    found = formula_code.orbit(shape.sequence, POINT, shape.iterations, shape.bailout)
+    assert found.scalar
+    points = np.random.default_rng(9).uniform(-2, 2, (100, 3))
+    z, limits = points.copy(), np.array([1, 0.5, 1e6])
+    for _ in range(4):
+        z = 2 * (np.clip(z, -limits, limits) * 2 - z) + points
+    dr = 2 ** 5 - 1                 # dr -> 2 dr + 1, four times from 1
+    np.testing.assert_allclose(ir.evaluate_at((found.distance,), points)[0], np.linalg.norm(z, axis=1) / dr,
+                               rtol=1e-12)
