@@ -31,7 +31,7 @@ MISTAKES = [
     ("formula f() {\n    z = z * q + c\n}\nscene fractal(f())", "2:13", "unknown name 'q' in formula"),
     ("formula f() {\n    z = boxfold(z, 1) + c\n}\nscene fractal(f())", "2:9", "unknown function 'boxfold'"),
     ("formula f() {\n    z = box_fold(z) + c\n}\nscene fractal(f())", "2:9", "'box_fold' takes 2 arguments"),
-    ("formula f() {\n    z = box_fold(z, (1, 2, 3)) + c\n}\nscene fractal(f())", "2:21", "needs a number here"),
+    ("formula f() {\n    z = sphere_fold(z, (1, 2, 3), 1) + c\n}\nscene fractal(f())", "2:24", "needs a number here"),
     ("formula f() {\n    w = z + c\n}\nscene fractal(f())", "1:1", "'f' never sets z"),
     ("formula f() {\n    z = length(z)\n}\nscene fractal(f())", "2:5", "z is a 3-vector before the step and a number"),
     ("formula f() {\n    if z.x { z = z * 2 }\n    z = z + c\n}\nscene fractal(f())", "2:8", "'if' needs a comparison"),
