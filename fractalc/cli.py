@@ -209,9 +209,11 @@ def command_check(args) -> int:
         return 0
     from .overstep import measure
     _require_positive(("--rays", args.rays))
+    if not 0 < args.surface < 1:
+        raise UsageError("--surface must be between 0 and 1 (bound radii)")
     scene = _load(args)
     try:
-        result = measure(scene, rays=args.rays, seed=args.seed)
+        result = measure(scene, rays=args.rays, seed=args.seed, surface=args.surface)
     except ValueError as error:
         raise UsageError(f"--de: {error}") from None
     print(f"{args.scene}: {result.report()}")
@@ -497,6 +499,9 @@ def _parser() -> argparse.ArgumentParser:
                         help="measure the distance estimate against the surface found by fine marching")
     check_.add_argument("--rays", type=int, default=400, help="with --de: seeded rays (default 400)")
     check_.add_argument("--seed", type=int, default=0, help="with --de: the rays' seed")
+    check_.add_argument("--surface", type=float, default=1e-5,
+                        help="with --de: the estimate, in bound radii, below which a point is on the surface "
+                             "(default 1e-5; raise it for thin sets whose estimate stays above it)")
     device_options(check_)
     check_.set_defaults(run=command_check)
 

@@ -79,7 +79,8 @@ def measure(scene, rays: int = 400, steps: int = 1500, seed: int = 0, surface: f
     first = np.argmax(inside, axis=1)
     met = np.flatnonzero(inside.any(axis=1) & (first > 0))     # rays starting inside compare nothing
     if not len(met):
-        raise ValueError("no ray met the surface: nothing to compare")
+        raise ValueError(f"no ray met the surface (the estimate stayed above {surface / radius:g} bound radii "
+                         f"along every ray; a thin set's may: raise --surface)")
     low, high = t[first[met] - 1], t[first[met]]
     for _ in range(40):                       # bisect every ray's crossing at once
         middle = 0.5 * (low + high)

@@ -73,3 +73,16 @@ def test_the_scene_bound_is_computed_on_the_device():
     assert np.allclose(centre, (1, 2, 3)) and abs(radius - 1.5) < 1e-6
     assert fractalc.loads("scene plane()").bound() is None
     assert fractalc.loads("scene sphere(1) | plane(offset: -2)").bound() is None     # a ground: unbounded
+
+
+def test_a_thin_set_needs_a_higher_surface_level(tmp_path, capsys):
+    """A linear IFS estimate |z| / 2^n stays above 1e-5 bound radii after a
+    few iterations, even on the attractor: the default level meets no
+    surface (a usage error saying what to raise), --surface 1e-2 does."""
+    (tmp_path / "ifs.frac").write_text("scene fractal(tetra_ifs(), iterations: 6, bound: 1.75)\n")
+    path = str(tmp_path / "ifs.frac")
+    assert cli.main(["check", "--de", "--rays", "40", path]) == 2
+    assert "no ray met the surface" in capsys.readouterr().err
+    assert cli.main(["check", "--de", "--rays", "40", "--surface", "1e-2", path]) == 0
+    assert "rays met the surface" in capsys.readouterr().out
+    assert cli.main(["check", "--de", "--surface", "0", path]) == 2
