@@ -265,7 +265,7 @@ class _Checker:
         values = {}
         for p in FORMULA_FORMS["fractal"].parameters[1:]:
             if p.name not in bound:
-                values[p.name] = _default(p) if p.name == "iterations" else None
+                values[p.name] = _default(p) if p.name in ("iterations", "step") else None
                 continue
             arg, value = bound[p.name]
             if p.name == "julia" and value.type == "vec4":
@@ -281,7 +281,7 @@ class _Checker:
             self.fail(e.span, f"{mistake.message} (in the library's '{inside.name}', "
                               f"{inside.file}:{mistake.span.line})")
         return self.shape(Fractal(formula.data, values["iterations"], values["bailout"], values["julia"],
-                                  values["bound"], e.span))
+                                  values["bound"], values["step"], e.span))
 
     def constant_number(self, expr: ast.Expr, what: str) -> float | None:
         value = self.evaluate(expr)
@@ -965,7 +965,7 @@ RENDER_KEYS = _keys(
 FORMULA_FORMS = {
     "fractal": Signature("fractal", "fractal", (
         _P("formula", "formula"), _P("iterations", "int", 12.0, "1..1000"), _P("bailout", "num", 0.0, ">0"),
-        _P("julia", "vec3", 0.0), _P("bound", "num", 0.0, ">0"))),
+        _P("julia", "vec3", 0.0), _P("bound", "num", 0.0, ">0"), _P("step", "num", 1.0, ">0", "<=1"))),
     "hybrid": Signature("fractal", "hybrid", ()),
 }
 # The point formulas are tried at when checked

@@ -229,7 +229,7 @@ class _Lowerer:
 
     @staticmethod
     def fractal(s: Fractal, point: Point) -> ir.Expr:
-        distance = formula_code.orbit(s.sequence, point, s.iterations, s.bailout, s.julia).distance
+        distance = ir.mul(formula_code.orbit(s.sequence, point, s.iterations, s.bailout, s.julia).distance, s.step)
         if s.bound is None:
             return distance
         bound = ir.call("sd_sphere", (ir.Vec(point), s.bound))

@@ -89,6 +89,7 @@ class Fractal:
     bailout: ir.Expr | None               # None: no bailout
     julia: ir.Vec | None                  # c: this constant, not the point
     bound: ir.Expr | None                 # a radius holding the fractal (None: not known)
+    step: ir.Expr                         # the estimate's factor: check --de's safe step factor
     span: Span
 
 

@@ -278,3 +278,14 @@ def test_a_box_fold_with_a_limit_per_axis_keeps_the_scalar_derivative():
     dr = 2 ** 5 - 1                 # dr -> 2 dr + 1, four times from 1
     np.testing.assert_allclose(ir.evaluate_at((found.distance,), points)[0], np.linalg.norm(z, axis=1) / dr,
                                rtol=1e-12)
+
+
+def test_step_scales_the_estimate_to_its_safe_factor(tmp_path):
+    """`step: F` multiplies the estimate (check --de's safe step factor for a
+    formula that oversteps); outside (0, 1] it is a located error."""
+    text = "scene fractal(bulb(), iterations: 8, bailout: 2, bound: 1.2{step})"
+    points = np.random.default_rng(10).uniform(-1.2, 1.2, (64, 3))
+    plain = fractalc.loads(text.format(step="")).distance(points)
+    halved = fractalc.loads(text.format(step=", step: 0.5")).distance(points)
+    np.testing.assert_allclose(halved, plain * 0.5, rtol=1e-6)
+    assert "'step' of 'fractal' must be at most 1, not 1.5" in _error(text.format(step=", step: 1.5"))
