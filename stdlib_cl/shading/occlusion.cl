@@ -2,17 +2,23 @@
 // "Distance Estimated 3D Fractals" part II; Quilez): where the surface is
 // open, d(p + n i delta) = i delta; nearby geometry makes it smaller.
 // Returns 1 (open) .. 0 (fully occluded), scaled by `strength`.
+// The farthest sample comes first: once a sample k is open (d_k >= k delta),
+// every nearer one is too, since the distance changes by at most the step
+// between them (d_i >= d_k - (k - i) delta >= i delta), so the ray's
+// remaining samples would add nothing and are not taken.
 real ambient_occlusion(vec3 p, vec3 normal, real delta, real strength, __constant scalar *params) {
     real occlusion = 0.0f;
-    real weight = 0.5f;
-    for (int i = 1; i <= 5; i++) {
+    real weight = 1.0f / 32.0f;      // 0.5^i for the sample i
+    mask open = (mask)0;
+    for (int i = 5; i >= 1 && !ALL(open); i--) {
         real along = delta * (real)i;
 #if FEATURE_COUNT
-        count_evaluations(COUNT_AO, scoped(params), 1.0f, params);
+        count_evaluations(COUNT_AO, scoped(params) & !open, 1.0f, params);
 #endif
         real d = distance_estimate(v3_add(p, v3_scale(normal, along)), params);
-        occlusion += weight * max(along - d, 0.0f) / delta;
-        weight *= 0.5f;
+        occlusion += SELECT(weight * max(along - d, 0.0f) / delta, (real)0.0f, open);
+        open = open | (d >= along);
+        weight *= 2.0f;
     }
     return clamp(1.0f - strength * occlusion, 0.0f, 1.0f);
 }
