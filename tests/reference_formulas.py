@@ -170,6 +170,16 @@ def benesi(z, c, state):
     return np.stack([new_x, k * (y * y - w * w), k * 2 * y * w], axis=1) + c, state, None
 
 
+def xenodreambuie(z, c, state, power=8.0, alpha=0.0, beta=0.0):
+    """Jesse's step: the polar angle, beyond +-90 degrees, mirrored back."""
+    r = np.maximum(_norm(z), 1e-30)
+    th = (np.arctan2(z[:, 1], z[:, 0]) + np.radians(beta)) * power
+    ph = np.arccos(np.clip(z[:, 2] / r, -1, 1)) + np.radians(alpha)
+    ph = np.where(np.abs(ph) > np.pi / 2, np.sign(ph) * np.pi - ph, ph) * power
+    direction = np.stack([np.cos(th) * np.sin(ph), np.sin(th) * np.sin(ph), np.cos(ph)], axis=1)
+    return r[:, None] ** power * direction + c, state, None
+
+
 def riemann_sphere(z, c, state, scale=1.0, shift=(0, 0, 0), escape=1.5):
     r = np.maximum(_norm(z), 1e-30)
     z = z * (scale / r)[:, None]

@@ -70,6 +70,8 @@ CASES = {
     "bulb": Case((("bulb", dict(power=7.0)),), 8, 1.3, "escape", bailout=2.0),
     "bristorbrot": Case((("bristorbrot", {}),), 6, 2.0, "jacobian", bailout=4.0),
     "benesi": Case((("benesi", {}),), 6, 2.0, "jacobian", bailout=4.0),
+    "xenodreambuie": Case((("xenodreambuie", dict(power=7.0, alpha=10.0, beta=-20.0)),), 6, 1.3, "jacobian",
+                          bailout=2.0),
     "riemann_sphere": Case((("riemann_sphere", dict(scale=1.0, shift=(0, 0, 0), escape=1.5)),), 5, 1.6,
                            "jacobian", bailout=1.5),
 }
