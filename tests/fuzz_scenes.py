@@ -523,7 +523,7 @@ class _Generator:
         words = {"shadows": ("none", "hard", "soft")}
         if self.take_defect(0.06):
             self.made = "unknown light kind"
-            return f"light {self.mark('spot')} " + self.block(LIGHT_KEYS, required=(need,), words=words)
+            return f"light {self.mark('laser')} " + self.block(LIGHT_KEYS, required=(need,), words=words)
         return f"light {kind} " + self.block(LIGHT_KEYS, required=(need,), words=words)
 
     def render(self) -> str:
