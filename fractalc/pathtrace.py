@@ -7,6 +7,8 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import numpy as np
+
 from .program import CheckedScene
 from .resources import resource_dir
 
@@ -93,16 +95,15 @@ def pass_frames(frame):
 
 def render_passes(render_frame, frame):
     """The pixels of `frame` as the mean of its passes' colour and coverage,
-    each weighted by its samples; the other channels (depth, normals,
-    passes: the pixel-centre ray's) are the first pass's.
-    `render_frame(frame)` renders one pass into a new array."""
-    total = None
+    each weighted by its samples (summed in double: a pass's colour may
+    reach float's largest); the other channels (depth, normals, passes:
+    the pixel-centre ray's) are the first pass's. `render_frame(frame)`
+    renders one pass into a new array."""
+    first, total = None, None
     for part in pass_frames(frame):
         pixels = render_frame(part)
-        if total is None:
-            total = pixels
-            total[..., :4] *= part.samples
-        else:
-            total[..., :4] += pixels[..., :4] * part.samples
-    total[..., :4] /= frame.samples
-    return total
+        if first is None:
+            first, total = pixels, np.zeros(pixels.shape[:-1] + (4,))
+        total += pixels[..., :4] * float(part.samples)
+    first[..., :4] = np.minimum(total / frame.samples, np.finfo(np.float32).max)
+    return first

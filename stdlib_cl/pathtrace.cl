@@ -169,10 +169,15 @@ vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel
         vec3 h = v3_select(n, around_normal(n, v3(sin_h * cos(angle), sin_h * sin(angle), cos_h)), glossy);
         real vh = v3_dot(to_eye, h);
         vec3 reflected = v3_sub(v3_scale(h, 2.0f * vh), to_eye);   // the mirror lobe: h = n
-        real nv = max(v3_dot(n, to_eye), 1e-6f), nl = v3_dot(n, reflected);
-        real glossy_weight_now = smith_ggx(nv, alpha) * smith_ggx(max(nl, 0.0f), alpha) * vh
-                                 / (nv * max(v3_dot(n, h), 1e-6f));
-        real specular_weight = SELECT(SELECT((real)0.0f, (real)1.0f, nl > 0.0f), glossy_weight_now, glossy);
+        real nv = v3_dot(n, to_eye), nl = v3_dot(n, reflected);
+        // G(v) / n.v written out: bounded (by 2 / alpha) where n.v is tiny
+        real a2 = alpha * alpha;
+        real masking_over_nv = 2.0f / (nv + sqrt(a2 + (1.0f - a2) * nv * nv));
+        real glossy_weight_now = masking_over_nv * smith_ggx(max(nl, 0.0f), alpha) * vh / max(v3_dot(n, h), 1e-6f);
+        // only reflections from the eye's side to the eye's side (a grazing
+        // ray stops short of the surface, where n.v may be negative)
+        mask reflects = (nv > 0.0f) & (nl > 0.0f) & (vh > 0.0f);
+        real specular_weight = SELECT((real)0.0f, SELECT((real)1.0f, glossy_weight_now, glossy), reflects);
         scattered = v3_select(reflected, scattered, diffuse);
         weight = v3_select(v3(specular_weight, specular_weight, specular_weight), weight, diffuse);
         throughput = v3_mul(throughput, weight);
