@@ -31,7 +31,7 @@ except ImportError:
 from .api import Image, Scene, load                      # noqa: E402  (after the pygame check)
 from .paths import camera_at, params_at                  # noqa: E402
 from .program import Camera                              # noqa: E402
-from .write import linear_to_srgb                        # noqa: E402
+from .write import linear_to_srgb, tone_mapped           # noqa: E402
 
 PASS_SAMPLES = 2              # per refining pass: short passes keep the window responsive
 LOOK_RADIANS_PER_PIXEL = 0.004
@@ -361,8 +361,11 @@ class Viewer:
         self.linear, self.samples = rgb, samples
 
     def pixels(self) -> np.ndarray:
-        """The displayed image as sRGB 8-bit (H, W, 3), at its render size."""
-        return np.round(linear_to_srgb(self.linear) * 255.0).astype(np.uint8)
+        """The displayed image as sRGB 8-bit (H, W, 3), at its render size,
+        through the scene's exposure and tone curve, as a PNG shows it."""
+        render = self.scene.checked.render
+        return np.round(linear_to_srgb(tone_mapped(self.linear, render.exposure, render.tonemap)) * 255.0
+                        ).astype(np.uint8)
 
     def status(self) -> str:
         height, width = self.linear.shape[:2]

@@ -185,3 +185,16 @@ def test_a_palette_on_a_plain_shape_is_its_colour_at_zero_and_follows_params():
     scene.set_params({"shift": 0.25})
     red = scene.render(aovs=["albedo"]).passes["albedo"][ball][:, 0]
     assert np.abs(red - 0.5).max() < 1e-6 and len(scene._programs) == built
+
+
+def test_the_viewer_shows_the_exposure_and_tone_curve_as_a_png_would(tmp_path, monkeypatch):
+    import io
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    pytest.importorskip("pygame")
+    from fractalc.view import Viewer
+    path = tmp_path / "scene.frac"
+    path.write_text(SCENE.replace("background: (0.2, 0.2, 0.2)", "background: (0.2, 0.2, 0.2), exposure: 2, "
+                                                                  "tonemap: reinhard"))
+    viewer = Viewer(str(path), output_dir=str(tmp_path), out=io.StringIO(), err=io.StringIO())
+    viewer.step(0.05)
+    assert viewer.pixels()[0, 0, 0] == round(srgb(0.8 / 1.8) * 255)
