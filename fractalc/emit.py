@@ -686,7 +686,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         f"    return {normal_method}(p, h, params);\n}}",
         shade,
         resolve_features(lib.template, on),
-        pathtrace.source(scene, literal) if on["PATH_TRACE"] else "",
+        pathtrace.source(scene, literal, on["TRANSPARENCY"]) if on["PATH_TRACE"] else "",
     ]
     source = "\n\n".join(p.strip("\n") for p in parts if p) + "\n"
     return double_literals(source) if target.double else source

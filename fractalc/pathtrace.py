@@ -46,9 +46,10 @@ def lights_table(scene: CheckedScene) -> list[list[float]]:
     return rows
 
 
-def source(scene: CheckedScene, literal) -> str:
+def source(scene: CheckedScene, literal, transparency: bool) -> str:
     """The path tracer's constants and functions for `scene`, numbers
-    written by `literal` (the emitter's float literals)."""
+    written by `literal` (the emitter's float literals); `transparency`:
+    whether some material is transparent (the template's FEATURE_TRANSPARENCY)."""
     render = scene.render
     environment = render.environment
     if environment is None:     # the background, everywhere
@@ -59,6 +60,7 @@ def source(scene: CheckedScene, literal) -> str:
     rows = lights_table(scene)
     constants = [f"#define BOUNCES {render.bounces}", f"#define LIGHT_STRIDE {LIGHT_STRIDE}",
                  f"#define CAMERA_SEES_ENVIRONMENT {int(render.background != 'transparent')}",
+                 f"#define PATH_TRANSPARENCY {int(transparency)}",
                  *(f"#define ENVIRONMENT_{part}_{c} {literal(v * (environment.intensity if environment else 1.0))}"
                    for part, colour in sky.items() for c, v in zip("RGB", colour)),
                  f"#define LIGHT_COUNT {len(rows)}",

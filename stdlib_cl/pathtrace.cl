@@ -5,6 +5,8 @@
 //   BOUNCES                 the most surface scatterings of a path
 //   ENVIRONMENT_ZENITH_R .. ENVIRONMENT_GROUND_B   the sky's radiance
 //   CAMERA_SEES_ENVIRONMENT 1, or 0 with a transparent background
+//   PATH_TRANSPARENCY       1 where a material is transparent (the template
+//                           then has through_solid)
 //   LIGHT_COUNT, LIGHTS[]   LIGHT_STRIDE numbers per light: kind (0
 //                           directional, 1 point, 2 the headlight, 3 spot,
 //                           4 sphere),
@@ -114,7 +116,9 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
             march_result blocker = march(lifted, to_light, lit, pixel_angle, 0.0f, params);
             lit = lit & !(blocker.hit & (blocker.t < reach));
         }
-        real glossy = SELECT((real)0.0f, ggx_brdf(n, to_light, to_eye, alpha), v3_dot(n, to_eye) > 0.0f);
+        // (only where both the light and the eye face the surface: elsewhere
+        // Smith's masking divides by zero, and 0 times that is not 0)
+        real glossy = SELECT((real)0.0f, ggx_brdf(n, to_light, to_eye, alpha), lit & (v3_dot(n, to_eye) > 0.0f));
         // irradiance E times the BRDF (albedo / pi diffuse, plus the glossy lobe) times the cosine
         vec3 reflected = v3_add(v3_scale(albedo, diffuse_weight * INV_PI), v3((real)(glossy_weight * glossy),
                                 glossy_weight * glossy, glossy_weight * glossy));
@@ -142,13 +146,16 @@ vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel
         // the distance's gradient, outward (not turned toward the ray: a
         // grazing ray stops short of the surface, where it may face away)
         vec3 n = normal;
-        // the material's lobes: mirror (reflectivity), glossy GGX (specular,
-        // roughness from shininess as for Blinn-Phong), diffuse (the rest)
+        // the material's lobes: mirror (reflectivity), clear glass
+        // (transparency), glossy GGX (specular, roughness from shininess as
+        // for Blinn-Phong), diffuse (the rest)
         real mirror_weight = clamp(s.reflectivity, 0.0f, 1.0f);
-        real glossy_weight = (1.0f - mirror_weight) * clamp(s.specular, 0.0f, 1.0f);
-        real diffuse_weight = 1.0f - mirror_weight - glossy_weight;
+        real glass_weight = (1.0f - mirror_weight) * clamp(s.transparency, 0.0f, 1.0f);
+        real glossy_weight = (1.0f - mirror_weight - glass_weight) * clamp(s.specular, 0.0f, 1.0f);
+        real diffuse_weight = 1.0f - mirror_weight - glass_weight - glossy_weight;
         real alpha = max(sqrt(2.0f / (s.shininess + 2.0f)), SMALLEST_ROUGHNESS);
-        vec3 lifted = v3_add(p, v3_scale(n, 2.0f * hit_threshold(travelled, pixel_angle)));
+        real threshold = hit_threshold(travelled, pixel_angle);
+        vec3 lifted = v3_add(p, v3_scale(n, 2.0f * threshold));
         radiance = v3_add(radiance, v3_mul(throughput, direct_light(p, lifted, n, to_eye, eye, albedo, diffuse_weight,
                                                                      glossy_weight, alpha, active, key,
                                                                      1000u + (uint)bounce * 64u, pixel_angle, params)));
@@ -180,6 +187,19 @@ vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel
         real specular_weight = SELECT((real)0.0f, SELECT((real)1.0f, glossy_weight_now, glossy), reflects);
         scattered = v3_select(reflected, scattered, diffuse);
         weight = v3_select(v3(specular_weight, specular_weight, specular_weight), weight, diffuse);
+        vec3 start = lifted;
+#if PATH_TRANSPARENCY
+        // glass: through the solid (the direct renderer's through_solid),
+        // white, on from its far side
+        mask through = active & !diffuse & !glossy & (choice < diffuse_weight + glossy_weight + glass_weight);
+        if (ANY(through)) {
+            vec3 out_start;
+            vec3 out_dir = through_solid(p, dir, n, s.ior, threshold, through, &out_start, params);
+            scattered = v3_select(scattered, out_dir, through);
+            start = v3_select(start, out_start, through);
+            weight = v3_select(weight, v3((real)1.0f, 1.0f, 1.0f), through);
+        }
+#endif
         throughput = v3_mul(throughput, weight);
         // Russian roulette: a dim path goes on with the probability of its
         // brightness, and if it does, counts for the ones that stopped
@@ -189,13 +209,13 @@ vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel
             throughput = v3_scale(throughput, 1.0f / max(going_on, (real)1e-6f));
         }
         active = active & (max(throughput.x, max(throughput.y, throughput.z)) > 0.0f);
-        m = march(lifted, scattered, active, pixel_angle, 0.0f, params);
+        m = march(start, scattered, active, pixel_angle, 0.0f, params);
         mask escaped = active & !m.hit;
         radiance = v3_add(radiance, v3_mul(throughput, v3_scale(environment(scattered),
                                                                 SELECT((real)0.0f, (real)1.0f, escaped))));
         active = active & m.hit;
-        normal = hit_normal(lifted, scattered, m, pixel_angle, params);
-        origin = lifted;
+        normal = hit_normal(start, scattered, m, pixel_angle, params);
+        origin = start;
         dir = scattered;
     }
     return radiance;

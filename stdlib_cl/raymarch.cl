@@ -351,18 +351,13 @@ vec3 refracted(vec3 dir, vec3 normal, real eta) {
     return v3_select(v3_normalize(bent), dir, k < 0.0f);
 }
 
-// Transparency (seed 000, seed 004): the ray refracts into the solid,
-// marches inside it to its far side, refracts out, and what it sees there is
-// mixed in by `transparency`.
-vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 seen,
-                       scalar pixel_angle, __constant scalar *params) {
-    vec3 p = v3_add(origin, v3_scale(dir, m.t));
-    surface s = surface_at(p, params);
-    mask active = m.hit & (s.transparency > 0.0f);
-    if (!ANY(active))
-        return seen;
-    real threshold = hit_threshold(m.t, pixel_angle);
-    vec3 inside_dir = refracted(dir, normal, 1.0f / s.ior);
+// Through a transparent solid entered at p (seed 000, seed 004): the ray
+// `dir` refracts in (ratio 1 / ior), marches inside to the far side and
+// refracts out; returns the way out, and in *out_start where the ray goes
+// on (lifted off the far side). Lanes not `active` are not marched.
+vec3 through_solid(vec3 p, vec3 dir, vec3 normal, real ior, real threshold, mask active, vec3 *out_start,
+                   __constant scalar *params) {
+    vec3 inside_dir = refracted(dir, normal, 1.0f / ior);
     // Inside is where the distance is below the hit threshold, as at the hit
     // `p` itself. A signed distance is marched by the depth -d; the inside of
     // an escape-time fractal has no depth (its estimate is about 0 there),
@@ -401,8 +396,21 @@ vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 
     count_march_purpose(COUNT_REFRACTION, params);
 #endif
     vec3 exit_normal = estimate_normal(exit, threshold, params);
-    vec3 out_dir = refracted(inside_dir, v3_scale(exit_normal, -1.0f), s.ior);
-    vec3 out_start = v3_add(exit, v3_scale(exit_normal, 2.0f * threshold));
+    *out_start = v3_add(exit, v3_scale(exit_normal, 2.0f * threshold));
+    return refracted(inside_dir, v3_scale(exit_normal, -1.0f), ior);
+}
+
+// Transparency: what the ray sees through the solid (through_solid) is
+// mixed in by `transparency`.
+vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 seen,
+                       scalar pixel_angle, __constant scalar *params) {
+    vec3 p = v3_add(origin, v3_scale(dir, m.t));
+    surface s = surface_at(p, params);
+    mask active = m.hit & (s.transparency > 0.0f);
+    if (!ANY(active))
+        return seen;
+    vec3 out_start;
+    vec3 out_dir = through_solid(p, dir, normal, s.ior, hit_threshold(m.t, pixel_angle), active, &out_start, params);
     march_result beyond = march(out_start, out_dir, active, pixel_angle, 0.0f, params);
     vec3 beyond_normal = hit_normal(out_start, out_dir, beyond, pixel_angle, params);
     vec3 far = v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);

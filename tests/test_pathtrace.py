@@ -293,3 +293,27 @@ def test_the_direct_renderer_lights_with_a_sphere_as_a_point_with_soft_shadows()
     point = fractalc.loads(text.replace("light sphere { position: (0.1, 0.2, 2), radius: 0.3,",
                                         "light point { position: (0.1, 0.2, 2), shadows: soft,")).render()
     assert np.array_equal(sphere.rgba, point.rgba)
+
+
+def test_a_clear_glass_ball_vanishes_in_a_uniform_environment():
+    glass = furnace(1.0).checked.source.replace("specular: 0", "specular: 0, transparency: 1, ior: 1.5")
+    image = fractalc.loads(glass).render(samples=8)
+    assert (image.rgba[..., 3] == 1).sum() > 150
+    assert np.abs(image.rgba[..., :3] - 1).max() < 1e-4     # every path through it comes out
+
+
+@pytest.mark.parametrize("ior", [1.0, 1.5])
+def test_a_glass_ball_shows_the_wall_behind_it_refracted_as_the_direct_renderer_does(ior):
+    from test_effects import W, H, _glass_scene, _through_the_sphere
+    x_wall, inside = _through_the_sphere(ior)
+    clear = inside & (np.isnan(x_wall) | ((np.abs(x_wall) > 0.1) & (np.abs(x_wall) < 1.9)))
+    expected = np.where(np.isnan(x_wall), 0, np.where(x_wall < 0, 1, -1))
+    # the path tracer's samples spread over the pixel: not where a neighbour sees something else
+    clear &= np.all([np.roll(expected, shift, axis) == expected for shift in (-1, 1) for axis in (0, 1)], axis=0)
+    text = _glass_scene(ior=ior, more=f", integrator: path, bounces: 3, {UNIFORM}")
+    rgb = fractalc.loads(text).render(samples=4, width=W, height=H).rgba[..., :3]
+    # the left wall is red, the right one blue; the sky white
+    seen = np.select([rgb[..., 0] > 2 * rgb[..., 2] + 0.1, rgb[..., 2] > 2 * rgb[..., 0] + 0.1,
+                      (np.abs(rgb - 1) < 0.05).all(axis=-1)], [1, -1, 0], 9)
+    agree = (seen == expected)[clear].mean()
+    assert clear.sum() > 300 and agree > 0.97, agree
