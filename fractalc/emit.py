@@ -488,6 +488,7 @@ def features(scene_ir: SceneIR) -> dict[str, bool]:
         **{f"PASS_{name.upper()}": name in render.aovs for name in PASSES},
         "SHADING_PASSES": bool({"diffuse", "specular", "shadow", "ao"} & set(render.aovs)),
         "PATH_TRACE": render.integrator == "path",
+        "ENVIRONMENT": pathtrace.uses_environment(render),
     }
 
 
@@ -506,6 +507,8 @@ def _effect_constants(render, on: dict[str, bool]) -> list[str]:
         lines.append(f"#define OVERRELAX {literal(render.overrelax)}")
     if on["REFLECTIONS"]:
         lines.append(f"#define REFLECTIONS {render.reflections}")
+    if on["ENVIRONMENT"]:
+        lines += pathtrace.environment_constants(render, literal)
     return lines
 
 

@@ -46,23 +46,35 @@ def lights_table(scene: CheckedScene) -> list[list[float]]:
     return rows
 
 
+def uses_environment(render) -> bool:
+    """Whether the kernel has the template's `environment` (the sky): an
+    `environment` block, or the path tracer (lit by the background without one)."""
+    return render.environment is not None or render.integrator == "path"
+
+
+def environment_constants(render, literal) -> list[str]:
+    """The sky's radiance: the environment block's, else the background
+    colour everywhere (none with a transparent background)."""
+    environment = render.environment
+    if environment is None:
+        colour = (0.0, 0.0, 0.0) if render.background == "transparent" else render.background
+        sky, intensity = {"ZENITH": colour, "HORIZON": colour, "GROUND": colour}, 1.0
+    else:
+        sky = {"ZENITH": environment.zenith, "HORIZON": environment.horizon, "GROUND": environment.ground}
+        intensity = environment.intensity
+    return [f"#define ENVIRONMENT_{part}_{c} {literal(v * intensity)}"
+            for part, colour in sky.items() for c, v in zip("RGB", colour)]
+
+
 def source(scene: CheckedScene, literal, transparency: bool) -> str:
     """The path tracer's constants and functions for `scene`, numbers
     written by `literal` (the emitter's float literals); `transparency`:
     whether some material is transparent (the template's FEATURE_TRANSPARENCY)."""
     render = scene.render
-    environment = render.environment
-    if environment is None:     # the background, everywhere
-        colour = (0.0, 0.0, 0.0) if render.background == "transparent" else render.background
-        sky = {"ZENITH": colour, "HORIZON": colour, "GROUND": colour}
-    else:
-        sky = {"ZENITH": environment.zenith, "HORIZON": environment.horizon, "GROUND": environment.ground}
     rows = lights_table(scene)
     constants = [f"#define BOUNCES {render.bounces}", f"#define LIGHT_STRIDE {LIGHT_STRIDE}",
                  f"#define CAMERA_SEES_ENVIRONMENT {int(render.background != 'transparent')}",
                  f"#define PATH_TRANSPARENCY {int(transparency)}",
-                 *(f"#define ENVIRONMENT_{part}_{c} {literal(v * (environment.intensity if environment else 1.0))}"
-                   for part, colour in sky.items() for c, v in zip("RGB", colour)),
                  f"#define LIGHT_COUNT {len(rows)}",
                  "__constant scalar LIGHTS[] = {",      # never empty (C has no empty arrays)
                  *(f"    {', '.join(literal(v) for v in row)}," for row in rows or [[0.0] * LIGHT_STRIDE]),

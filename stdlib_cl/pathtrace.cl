@@ -1,9 +1,8 @@
 // Monte Carlo path tracing (render key `integrator: path`; docs/looks.md).
 // Spliced after the template by the emitter (fractalc/pathtrace.py), only
 // into kernels of scenes that use it; the template calls `path_color` for
-// every sample. Above this file, fractalc/pathtrace.py defines:
+// every sample, and has `environment` (the sky) for it. Above this file, fractalc/pathtrace.py defines:
 //   BOUNCES                 the most surface scatterings of a path
-//   ENVIRONMENT_ZENITH_R .. ENVIRONMENT_GROUND_B   the sky's radiance
 //   CAMERA_SEES_ENVIRONMENT 1, or 0 with a transparent background
 //   PATH_TRANSPARENCY       1 where a material is transparent (the template
 //                           then has through_solid)
@@ -30,16 +29,6 @@
 // decision of a path has its own).
 real sample_random(lane_uint key, uint dimension) {
     return unit_random(hash_lanes(key + dimension * 0x9e3779b9u));
-}
-
-// The sky: horizon colour at the horizon, blending linearly in the height
-// of the direction (z is up) to the zenith above and the ground below.
-vec3 environment(vec3 dir) {
-    real above = max(dir.z, 0.0f), below = max(-dir.z, 0.0f);
-    vec3 horizon = v3(ENVIRONMENT_HORIZON_R, ENVIRONMENT_HORIZON_G, ENVIRONMENT_HORIZON_B);
-    vec3 zenith = v3(ENVIRONMENT_ZENITH_R, ENVIRONMENT_ZENITH_G, ENVIRONMENT_ZENITH_B);
-    vec3 ground = v3(ENVIRONMENT_GROUND_R, ENVIRONMENT_GROUND_G, ENVIRONMENT_GROUND_B);
-    return v3_add(horizon, v3_add(v3_scale(v3_sub(zenith, horizon), above), v3_scale(v3_sub(ground, horizon), below)));
 }
 
 // `v` (x, y along two tangents, z along n) in world space: the tangents of

@@ -241,6 +241,29 @@ void lens_sample(__constant scalar *camera, real u, real v, vec3 *origin, vec3 *
 }
 #endif
 
+#if FEATURE_ENVIRONMENT
+// The sky (render key environment, fractalc/pathtrace.py): horizon colour
+// at the horizon, blending linearly in the height of the direction (z is
+// up) to the zenith above and the ground below.
+vec3 environment(vec3 dir) {
+    real above = max(dir.z, 0.0f), below = max(-dir.z, 0.0f);
+    vec3 horizon = v3(ENVIRONMENT_HORIZON_R, ENVIRONMENT_HORIZON_G, ENVIRONMENT_HORIZON_B);
+    vec3 zenith = v3(ENVIRONMENT_ZENITH_R, ENVIRONMENT_ZENITH_G, ENVIRONMENT_ZENITH_B);
+    vec3 ground = v3(ENVIRONMENT_GROUND_R, ENVIRONMENT_GROUND_G, ENVIRONMENT_GROUND_B);
+    return v3_add(horizon, v3_add(v3_scale(v3_sub(zenith, horizon), above), v3_scale(v3_sub(ground, horizon), below)));
+}
+#endif
+
+// What a ray that misses along `dir` sees: the environment's sky where the
+// scene has one, else the background colour.
+vec3 background_seen(vec3 dir) {
+#if FEATURE_ENVIRONMENT
+    return environment(dir);
+#else
+    return v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);
+#endif
+}
+
 // A per-lane hash (PCG), for stratified jitter that is the same on every run.
 lane_uint hash_lanes(lane_uint v) {
     lane_uint state = v * 747796405u + 2891336453u;
@@ -324,7 +347,7 @@ vec3 reflected_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 se
         normal = hit_normal(start, dir, b, pixel_angle, params);
         p = v3_add(start, v3_scale(dir, b.t));
         threshold = hit_threshold(b.t, pixel_angle);
-        vec3 seen = v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);
+        vec3 seen = background_seen(dir);
 #if FEATURE_COUNT
         count_scope(b.hit, params);
 #endif
@@ -413,7 +436,7 @@ vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 
     vec3 out_dir = through_solid(p, dir, normal, s.ior, hit_threshold(m.t, pixel_angle), active, &out_start, params);
     march_result beyond = march(out_start, out_dir, active, pixel_angle, 0.0f, params);
     vec3 beyond_normal = hit_normal(out_start, out_dir, beyond, pixel_angle, params);
-    vec3 far = v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);
+    vec3 far = background_seen(out_dir);
     if (ANY(beyond.hit)) {
 #if FEATURE_COUNT
         count_scope(beyond.hit, params);
@@ -450,7 +473,7 @@ vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel
 // transparency, reflections, fog and glow.
 vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel_angle,
                  __constant scalar *params) {
-    vec3 color = v3(BACKGROUND_R, BACKGROUND_G, BACKGROUND_B);
+    vec3 color = background_seen(dir);
     if (ANY(m.hit)) {
         vec3 p = v3_add(origin, v3_scale(dir, m.t));
         real threshold = hit_threshold(m.t, pixel_angle);

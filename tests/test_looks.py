@@ -198,3 +198,31 @@ def test_the_viewer_shows_the_exposure_and_tone_curve_as_a_png_would(tmp_path, m
     viewer = Viewer(str(path), output_dir=str(tmp_path), out=io.StringIO(), err=io.StringIO())
     viewer.step(0.05)
     assert viewer.pixels()[0, 0, 0] == round(srgb(0.8 / 1.8) * 255)
+
+
+def test_the_direct_renderer_shows_the_environment_where_rays_miss_and_in_mirrors():
+    from fractalc import run
+    sky = {"zenith": (0.2, 0.4, 1.0), "horizon": (0.9, 0.8, 0.7), "ground": (0.1, 0.3, 0.05)}
+    scene = fractalc.loads(f"""
+    material mirror {{ color: (1, 1, 1), reflectivity: 1 }}
+    scene plane().material(mirror)
+    camera {{ position: (0, -4, 1.5), target: (0, 0, 0.8), fov: 60 }}
+    render {{ width: 32, height: 24, reflections: 1, dither: 0, epsilon: 1e-5,
+              environment: {{ {", ".join(f"{k}: {v}" for k, v in sky.items())}, intensity: 2 }} }}
+    """)
+    image = scene.render()
+    block = np.array(run.camera_block(scene.checked.camera))
+    forward, right, up, tan_half = block[3:6], block[6:9], block[9:12], block[12]
+    i, j = np.meshgrid(np.arange(32) + 0.5, np.arange(24) + 0.5)
+    dirs = (forward + ((2 * i / 32 - 1) * 32 / 24 * tan_half)[..., None] * right
+            + ((1 - 2 * j / 24) * tan_half)[..., None] * up)
+    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    below = dirs[..., 2] < 0
+    assert below.sum() > 100 and (~below).sum() > 100
+    # the floor mirrors the sky: every pixel shows the sky in its direction turned upward
+    z = np.abs(dirs[..., 2])[..., None]
+    expected = 2 * (np.array(sky["horizon"]) + z * np.subtract(sky["zenith"], sky["horizon"]))
+    # (where the floor is near: far off, float's normals of the plane wobble)
+    near = ~below | (1.5 / np.abs(dirs[..., 2]) < 10)
+    assert (below & near).sum() > 100
+    np.testing.assert_allclose(image.rgba[..., :3][near], expected[near], atol=2e-4)
