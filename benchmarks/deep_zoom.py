@@ -3,8 +3,10 @@ cleanly and double still does (docs/performance.md, "Deep zoom").
 
 The camera approaches a surface point along the scene camera's view
 direction: the point is where the centre ray of the scene's camera meets
-the surface (traced in double with a threshold of 1e-13), and the camera is
-put at distance D = 1e-1, 1e-2, ..., 1e-7 before it, looking at it; the
+the surface (traced in double with a threshold of 1e-13, then refined along
+the ray with the double estimate until it is below 1e-15, since the depth
+image holds floats), and the camera is put at distance D = 1e-1, 1e-2,
+..., 1e-7 (1e-K with --deepest K) before it, looking at it; the
 view then spans about D, so D is the feature scale on screen. At each D
 three renders are made with the scene's settings and one sample: float,
 double, and the reference of `fractalc bench --sweep` (double, a tenth of
@@ -17,7 +19,7 @@ on pixels both hit, relative to D:
 - double vs the reference shows the effect of the threshold, which scales
   with D; it stays at the same level at every D while double is clean.
 
-    python benchmarks/deep_zoom.py [SCENE] [--width W --height H] [--images DIR]
+    python benchmarks/deep_zoom.py [SCENE] [--width W --height H] [--deepest K] [--images DIR]
 
 (with fractalc importable: installed, or PYTHONPATH=. from the repository).
 """
@@ -35,10 +37,11 @@ from fractalc.bench import aligned, machine, machine_rows
 from fractalc.program import Camera
 from fractalc.sweep import compare, reference_settings, scene_settings
 
-DISTANCES = tuple(10.0 ** -k for k in range(1, 8))
+DEEPEST = 7                    # D down to 1e-DEEPEST
 CLEAN_MISMATCH = 0.01          # at most 1% of pixels hit in one render and missed in the other
 CLEAN_DEPTH = 0.01             # the median |Z - Z_ref| at most 1% of the camera distance
 SURFACE_EPSILON = 1e-13
+REFINED_EPSILON = 1e-15        # the surface point's estimate, refined on the host
 # name: (render, compared with)
 COMPARISONS = {"float vs double": ("float", "double"), "float vs reference": ("float", "reference"),
                "double vs reference": ("double", "reference")}
@@ -52,7 +55,24 @@ def surface_point(scene: fractalc.Scene) -> np.ndarray:
     depth = float(image.depth[0, 0])
     if not np.isfinite(depth):
         sys.exit("deep_zoom: the centre ray of the scene's camera misses the scene; aim it at the surface")
-    return np.asarray(camera.position) + _forward(camera) * depth
+    # the depth image holds floats (7 digits): from a little before it, on
+    # along the ray in double (sphere tracing, host-side) to where the
+    # estimate falls below REFINED_EPSILON
+    double = fractalc.Scene(scene.checked, scene.params, precision="double", device=scene.device_spec)
+    position, forward = np.asarray(camera.position, dtype=np.float64), _forward(camera)
+
+    def estimate(t: float) -> float:
+        return float(double.distance((position + forward * t)[None])[0])
+    back = 1e-5 * max(depth, 1.0)
+    while estimate(depth - back) <= 0:
+        back *= 10
+    depth -= back
+    for _ in range(10000):
+        distance = estimate(depth)
+        if distance < REFINED_EPSILON:
+            break
+        depth += distance
+    return position + forward * depth
 
 
 def _forward(camera: Camera) -> np.ndarray:
@@ -60,7 +80,8 @@ def _forward(camera: Camera) -> np.ndarray:
     return forward / np.linalg.norm(forward)
 
 
-def zoom(scene: fractalc.Scene, width: int, height: int, images: str | None = None) -> list[dict]:
+def zoom(scene: fractalc.Scene, width: int, height: int, images: str | None = None,
+         deepest: int = DEEPEST) -> list[dict]:
     """One row per distance: the COMPARISONS of the float, double and
     reference renders."""
     camera = scene.checked.camera
@@ -70,7 +91,7 @@ def zoom(scene: fractalc.Scene, width: int, height: int, images: str | None = No
     renders = {"float": {**settings, "precision": "float"}, "double": {**settings, "precision": "double"},
                "reference": reference_settings(settings)}
     rows = []
-    for distance in DISTANCES:
+    for distance in (10.0 ** -k for k in range(1, deepest + 1)):
         view = replace(camera, position=tuple(target - distance * forward), target=tuple(target), focus=None)
         image = {name: scene.render(width=width, height=height, camera=view, **keys)
                  for name, keys in renders.items()}
@@ -94,8 +115,11 @@ def _save_strip(directory: str, distance: float, image: dict) -> None:
     """float | double | reference, side by side, as a PNG."""
     from fractalc.write import write
     os.makedirs(directory, exist_ok=True)
-    rgba = np.concatenate([image[n].rgba for n in ("float", "double", "reference")], axis=1)
-    write(os.path.join(directory, f"zoom_{distance:.0e}.png"), {c: rgba[..., i] for i, c in enumerate("RGBA")}, {})
+    names = ("float", "double", "reference")
+    rgba = np.concatenate([image[n].rgba for n in names], axis=1)
+    planes = {c: rgba[..., i] for i, c in enumerate("RGBA")}
+    planes["Z"] = np.concatenate([image[n].depth for n in names], axis=1)
+    write(os.path.join(directory, f"zoom_{distance:.0e}.png"), planes, {})
 
 
 def table(rows: list[dict]) -> str:
@@ -117,11 +141,12 @@ def main(argv: list[str] | None = None) -> int:
                                                                  "mandelbulb.frac"))
     parser.add_argument("--width", type=int, help="default: the scene's")
     parser.add_argument("--height", type=int, help="default: the scene's")
+    parser.add_argument("--deepest", type=int, default=DEEPEST, metavar="K", help=f"down to D = 1e-K (default {DEEPEST})")
     parser.add_argument("--images", metavar="DIR", help="also save float | double | reference strips as PNGs")
     args = parser.parse_args(argv)
     scene = fractalc.load(args.scene)
     width, height = args.width or scene.checked.render.width, args.height or scene.checked.render.height
-    rows = zoom(scene, width, height, args.images)
+    rows = zoom(scene, width, height, args.images, args.deepest)
     print(aligned([("scene", os.path.relpath(args.scene)), ("size", f"{width}x{height}, 1 sample"),
                    *machine_rows(machine(scene))]))
     print()
@@ -132,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
           "float matches double at every distance")
     medians = [r["double vs reference"]["depth_median"] for r in rows]
     print(f"double against the reference: median depth error {min(medians):.2g} to {max(medians):.2g} D "
-          f"over D = {DISTANCES[0]:.0e} to {DISTANCES[-1]:.0e}")
+          f"over D = 1e-1 to {rows[-1]['distance']:.0e}")
     return 0
 
 

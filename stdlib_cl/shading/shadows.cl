@@ -3,18 +3,31 @@
 // light). Rays of lanes that are not `active` are not marched.
 
 // Hard shadow: 0 where the ray hits a surface before the light, else 1.
+// Over-relaxed (Keinert et al. 2014, as `march` is): steps of 1.6 d while
+// successive unbounding spheres overlap; where they do not, the ray steps
+// back and goes on plainly. A shadow ray leaves a surface, where d grows
+// along it and plain steps creep: half of bulb-640's shadow evaluations
+// were within 20 thresholds of the start (1.3 and 2 saved less: 2
+// overshoots often, and falls back).
 real hard_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, mask active,
                  __constant scalar *params) {
     real t = 2.0f * threshold;
     real visible = 1.0f;
+    real omega = 1.6f, previous = 0.0f, step = 0.0f;
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
 #if FEATURE_COUNT
         count_evaluations(COUNT_SHADOWS, active, 1.0f, params);
 #endif
         real d = distance_estimate(v3_add(origin, v3_scale(to_light, t)), params);
+        mask overshot = active & (omega > 1.0f) & (d + previous < step);
+        t = SELECT(t, t - step, overshot);
+        d = SELECT(d, previous, overshot);
+        omega = SELECT(omega, (real)1.0f, overshot);
         mask blocked = active & (d < threshold);
         visible = SELECT(visible, (real)0.0f, blocked);
-        t = t + max(d, threshold);
+        previous = d;
+        step = omega * max(d, threshold);
+        t = t + step;
         active = active & !blocked & (t < max_t);
     }
     return visible;
