@@ -100,14 +100,17 @@ real lowest_ratio(vec3 origin, vec3 to_light, real a, real b, real c, real ratio
 // surfaces). So a local minimum of the samples' d / t, where the light may
 // be dimmed (k d / t < 2: by the distance's slope of at most 1, less than
 // half the sample's d / t cannot lie between its neighbours), is refined
-// (`lowest_ratio`).
+// (`lowest_ratio`). Over-relaxed as `hard_shadow` is: an overshooting
+// sample (its sphere and the last one's do not overlap) still dims the light
+// by its d / t, but the samples of the dip test are the ones stepped from.
 real soft_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, real k, mask active,
                  __constant scalar *params) {
     real t = 2.0f * threshold;
     real visible = 1.0f;
-    // the previous two samples: ray distances and d / t
+    // the previous two samples: ray distances and d / t; the last one's d
     real t_before = t, t_last = t;
-    real ratio_before = (real)1e30f, ratio_last = (real)1e30f;
+    real ratio_before = (real)1e30f, ratio_last = (real)1e30f, d_last = 0.0f;
+    real omega = 1.6f, step = 0.0f;
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
 #if FEATURE_COUNT
         count_evaluations(COUNT_SHADOWS, active, 1.0f, params);
@@ -115,7 +118,9 @@ real soft_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, real k,
         real d = distance_estimate(v3_add(origin, v3_scale(to_light, t)), params);
         real ratio = d / t;
         visible = SELECT(visible, min(visible, k * ratio), active);
-        mask dip = active & (ratio_last <= ratio_before) & (ratio_last <= ratio) & (k * ratio_last < 2.0f);
+        mask overshot = active & (omega > 1.0f) & (d + d_last < step);
+        mask sampled = active & !overshot;
+        mask dip = sampled & (ratio_last <= ratio_before) & (ratio_last <= ratio) & (k * ratio_last < 2.0f);
         if (ANY(dip)) {
 #if FEATURE_COUNT
             count_scope(dip, params);
@@ -125,11 +130,14 @@ real soft_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, real k,
         }
         mask blocked = active & (d < threshold);
         visible = SELECT(visible, (real)0.0f, blocked);
-        t_before = t_last;
-        ratio_before = ratio_last;
-        t_last = t;
-        ratio_last = ratio;
-        t = t + max(d, threshold);
+        t_before = SELECT(t_before, t_last, sampled);
+        ratio_before = SELECT(ratio_before, ratio_last, sampled);
+        t_last = SELECT(t_last, t, sampled);
+        ratio_last = SELECT(ratio_last, ratio, sampled);
+        d_last = SELECT(d_last, d, sampled);
+        omega = SELECT(omega, (real)1.0f, overshot);
+        step = omega * max(d_last, threshold);
+        t = t_last + step;
         active = active & !blocked & (t < max_t);
     }
     return clamp(visible, 0.0f, 1.0f);
