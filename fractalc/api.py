@@ -228,6 +228,11 @@ class Scene:
                 raise ValueError(f"unknown render setting '{key}' (known: {', '.join(sorted(names))})")
             if value is None:
                 continue
+            if key == "environment_map":    # not a file's key: an image file, the sky
+                path = os.path.abspath(os.fspath(value))
+                pathtrace.environment_map(path)      # a ValueError where it cannot be read
+                settings = replace(settings, environment_map=path)
+                continue
             if key == "aovs":    # not a file's key: passes to add to the default channels
                 if isinstance(value, str):
                     raise ValueError(f"aovs must be a list of pass names, not the string {value!r}")

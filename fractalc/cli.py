@@ -183,7 +183,7 @@ def command_render(args) -> int:
         start = time.perf_counter()
         with cluster as client:
             image = scene.render(seed=args.seed, progress=not args.quiet, cluster=client, denoise=args.denoise,
-                                 **overrides)
+                                 environment_map=args.environment_map, **overrides)
     except ValueError as error:
         raise UsageError(str(error)) from None
     image.save(args.output, half=args.half, compression=args.compression or "zip", bits=args.bits)
@@ -471,6 +471,9 @@ def _parser() -> argparse.ArgumentParser:
                                  description="Render a scene. EXR: linear float with Z, normals and "
                                              "steps; PNG: sRGB 8-bit.")
     render.add_argument("scene")
+    render.add_argument("--environment-map", metavar="FILE",
+                        help="an equirectangular image (EXR, HDR, ...) as the sky: background, and light for "
+                             "integrator: path (see docs/looks.md)")
     render.add_argument("--denoise", action="store_true",
                         help="denoise the colour with Intel Open Image Denoise (the 'denoise' extra; "
                              "for path-traced images, see docs/looks.md)")

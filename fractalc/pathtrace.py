@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from functools import lru_cache
 
 import numpy as np
 
@@ -41,21 +42,97 @@ def lights_table(scene: CheckedScene) -> list[list[float]]:
         cone = (light.radius, 0.0) if light.kind == "sphere" else (outer, max(inner, outer + 1e-6))
         rows.append(_light_row(LIGHT_KINDS[light.kind], vector, light.color, light.intensity,
                                light.shadows != "none", tuple(c / length for c in light.direction), cone))
-    if not rows and scene.render.environment is None:   # nothing lights the scene: a headlight
+    if not rows and scene.render.environment is None and scene.render.environment_map is None:
+        # nothing lights the scene: a headlight
         rows.append(_light_row(HEADLIGHT, (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 1.0, True))
     return rows
 
 
 def uses_environment(render) -> bool:
     """Whether the kernel has the template's `environment` (the sky): an
-    `environment` block, or the path tracer (lit by the background without one)."""
-    return render.environment is not None or render.integrator == "path"
+    `environment` block or map, or the path tracer (lit by the background
+    without one)."""
+    return render.environment is not None or render.environment_map is not None or render.integrator == "path"
+
+
+# An environment map is resampled to MAP_WIDTH x MAP_HEIGHT texels in the
+# kernel (with its sampling tables, __constant arrays well under a GPU's
+# 64 KB of constant memory).
+MAP_WIDTH, MAP_HEIGHT = 64, 32
+# The path tracer draws the map's directions in proportion to its
+# brightness (importance sampling); False: by solid angle alone.
+IMPORTANCE = True
+
+
+@lru_cache(maxsize=8)
+def _map_texels(path: str, modified: float) -> np.ndarray:
+    import OpenImageIO as oiio
+    image = oiio.ImageInput.open(path)
+    if image is None:
+        raise ValueError(f"cannot read the environment map {path}: {oiio.geterror() or 'unknown format'}")
+    pixels = np.asarray(image.read_image(oiio.FLOAT), dtype=np.float64)
+    image.close()
+    if pixels.ndim != 3 or pixels.shape[2] < 3:
+        raise ValueError(f"the environment map {path} must have R, G and B channels")
+    height, width = pixels.shape[:2]
+    # box filter: each texel the mean of the source pixels whose centres fall in it
+    rows = np.minimum((np.arange(height) + 0.5) * MAP_HEIGHT // height, MAP_HEIGHT - 1).astype(int)
+    columns = np.minimum((np.arange(width) + 0.5) * MAP_WIDTH // width, MAP_WIDTH - 1).astype(int)
+    sums, counts = np.zeros((MAP_HEIGHT, MAP_WIDTH, 3)), np.zeros((MAP_HEIGHT, MAP_WIDTH, 1))
+    np.add.at(sums, (rows[:, None], columns[None, :]), np.maximum(pixels[..., :3], 0.0))
+    np.add.at(counts, (rows[:, None], columns[None, :]), 1.0)
+    # a map smaller than the texels: the nearest pixel where none falls
+    nearest = pixels[(np.arange(MAP_HEIGHT) * height // MAP_HEIGHT)[:, None],
+                     (np.arange(MAP_WIDTH) * width // MAP_WIDTH)[None, :], :3]
+    return np.where(counts > 0, sums / np.maximum(counts, 1.0), np.maximum(nearest, 0.0))
+
+
+def environment_map(path: str) -> np.ndarray:
+    """The equirectangular map at `path` (any format OpenImageIO reads;
+    row 0 looks straight up, +z; columns run from longitude -180 to 180
+    degrees about z, 0 along +x) as MAP_HEIGHT x MAP_WIDTH RGB texels."""
+    import os
+    try:
+        modified = os.stat(path).st_mtime
+    except OSError as error:
+        raise ValueError(f"cannot read the environment map {path}: {error.strerror}") from None
+    return _map_texels(path, modified)
+
+
+def _map_tables(texels: np.ndarray):
+    """The map's sampling tables: the cumulative distribution of rows, of
+    columns within each row, and each texel's probability density per
+    steradian. Texels are drawn in proportion to luminance times solid
+    angle (IMPORTANCE), or to solid angle alone."""
+    edges = np.cos(np.linspace(0.0, np.pi, MAP_HEIGHT + 1))
+    solid_angle = (edges[:-1] - edges[1:])[:, None] * (2 * np.pi / MAP_WIDTH) * np.ones((1, MAP_WIDTH))
+    luminance = texels @ np.array([0.2126, 0.7152, 0.0722])
+    weight = solid_angle * (luminance if IMPORTANCE else 1.0)
+    if weight.sum() <= 0:      # a black map: nothing to draw
+        weight = solid_angle
+    row_sums = weight.sum(axis=1)
+    rows = np.cumsum(row_sums) / row_sums.sum()
+    columns = np.cumsum(weight, axis=1) / np.maximum(row_sums, 1e-300)[:, None]
+    density = weight / weight.sum() / solid_angle
+    return rows, columns, density
 
 
 def environment_constants(render, literal) -> list[str]:
     """The sky's radiance: the environment block's, else the background
-    colour everywhere (none with a transparent background)."""
+    colour everywhere (none with a transparent background); with a map,
+    its texels and sampling tables, times the block's intensity."""
     environment = render.environment
+    if render.environment_map is not None:
+        texels = environment_map(render.environment_map)
+        rows, columns, density = _map_tables(texels)
+        scale = environment.intensity if environment is not None else 1.0
+
+        def table(name, values):
+            return f"__constant float {name}[] = {{{', '.join(literal(float(v)) for v in np.ravel(values))}}};"
+        return ["#define ENVIRONMENT_MAP 1", f"#define MAP_WIDTH {MAP_WIDTH}", f"#define MAP_HEIGHT {MAP_HEIGHT}",
+                table("ENVIRONMENT_TEXELS", np.minimum(texels * scale, MAX_IRRADIANCE)),
+                table("ENVIRONMENT_ROWS", rows), table("ENVIRONMENT_COLUMNS", columns),
+                table("ENVIRONMENT_DENSITY", density)]
     if environment is None:
         colour = (0.0, 0.0, 0.0) if render.background == "transparent" else render.background
         sky, intensity = {"ZENITH": colour, "HORIZON": colour, "GROUND": colour}, 1.0

@@ -234,6 +234,7 @@ class RenderSettings:
     integrator: str = "direct"       # direct: Blinn-Phong and the effects; path: Monte Carlo path tracing
     bounces: int = 4                 # path: the most surface scatterings of a path
     environment: Environment | None = None   # path: the sky; None: the background everywhere
+    environment_map: str | None = None       # an equirectangular image, the sky instead; not a file key
     aovs: tuple[str, ...] = ()       # passes beyond the default channels (run.PASSES); not a file key
 
 

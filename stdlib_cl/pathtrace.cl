@@ -59,6 +59,49 @@ real ggx_brdf(vec3 n, vec3 to_light, vec3 to_eye, real alpha) {
     return distribution * smith_ggx(nl, alpha) * smith_ggx(nv, alpha) / (4.0f * nl * nv);
 }
 
+#if ENVIRONMENT_MAP
+// One direction drawn from the map's tables for one lane (u1 picks the
+// row, u2 the column, u3 and u4 a point of the texel, uniform in solid
+// angle): the direction in `direction`, its density per steradian in
+// *density; returns the texel.
+int draw_texel(scalar u1, scalar u2, scalar u3, scalar u4, scalar *direction, scalar *density) {
+    int row = 0, column = 0;
+    while (row < MAP_HEIGHT - 1 && ENVIRONMENT_ROWS[row] <= u1)
+        row++;
+    __constant float *columns = ENVIRONMENT_COLUMNS + row * MAP_WIDTH;
+    while (column < MAP_WIDTH - 1 && columns[column] <= u2)
+        column++;
+    scalar longitude = ((scalar)column + u3) * (2.0f * PI_F / MAP_WIDTH) - PI_F;
+    scalar top = cos((scalar)row * (PI_F / MAP_HEIGHT)), bottom = cos((scalar)(row + 1) * (PI_F / MAP_HEIGHT));
+    scalar z = top - u4 * (top - bottom);
+    scalar across = sqrt(max(1.0f - z * z, 0.0f));
+    direction[0] = across * cos(longitude);
+    direction[1] = across * sin(longitude);
+    direction[2] = z;
+    *density = ENVIRONMENT_DENSITY[row * MAP_WIDTH + column];
+    return row * MAP_WIDTH + column;
+}
+
+// A direction toward the environment map per lane, drawn in proportion to
+// its brightness (random dimensions first .. first + 3): the direction and
+// its radiance in *dir and *radiance; returns its density per steradian.
+real sample_environment(lane_uint key, uint first, vec3 *dir, vec3 *radiance) {
+    scalar u[4][LANES], x[LANES], y[LANES], z[LANES], red[LANES], green[LANES], blue[LANES], density[LANES];
+    for (uint k = 0; k < 4u; k++)
+        STORE_LANES(sample_random(key, first + k), 0, u[k]);
+    for (int i = 0; i < LANES; i++) {
+        scalar direction[3];
+        int texel = 3 * draw_texel(u[0][i], u[1][i], u[2][i], u[3][i], direction, &density[i]);
+        x[i] = direction[0], y[i] = direction[1], z[i] = direction[2];
+        red[i] = ENVIRONMENT_TEXELS[texel], green[i] = ENVIRONMENT_TEXELS[texel + 1];
+        blue[i] = ENVIRONMENT_TEXELS[texel + 2];
+    }
+    *dir = v3(LOAD_LANES(0, x), LOAD_LANES(0, y), LOAD_LANES(0, z));
+    *radiance = v3(LOAD_LANES(0, red), LOAD_LANES(0, green), LOAD_LANES(0, blue));
+    return LOAD_LANES(0, density);
+}
+#endif
+
 // Light arriving at p from every light, reflected toward the eye:
 // next-event estimation with a shadow ray per light that casts shadows
 // (a sphere light's toward a point of it drawn with random dimensions
@@ -114,6 +157,23 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
         real strength = SELECT((real)0.0f, cosine * falloff, lit);
         total = v3_add(total, v3_mul(reflected, v3_scale(v3(light[4], light[5], light[6]), strength)));
     }
+#if ENVIRONMENT_MAP
+    // the environment map as a light: one direction drawn by its
+    // brightness, radiance times the BRDF times the cosine over the density
+    vec3 to_sky, sky;
+    real density = sample_environment(key, first + 2u * (uint)LIGHT_COUNT, &to_sky, &sky);
+    real cosine = v3_dot(n, to_sky);
+    mask lit = active & (cosine > 0.0f) & (density > 0.0f);
+    if (ANY(lit)) {
+        march_result blocker = march(lifted, to_sky, lit, pixel_angle, 0.0f, params);
+        lit = lit & !blocker.hit;
+        real glossy = SELECT((real)0.0f, ggx_brdf(n, to_sky, to_eye, alpha), lit & (v3_dot(n, to_eye) > 0.0f));
+        vec3 reflected = v3_add(v3_scale(albedo, diffuse_weight * INV_PI), v3((real)(glossy_weight * glossy),
+                                glossy_weight * glossy, glossy_weight * glossy));
+        real strength = SELECT((real)0.0f, cosine / max(density, (real)1e-30f), lit);
+        total = v3_add(total, v3_mul(reflected, v3_scale(sky, strength)));
+    }
+#endif
     return total;
 }
 
@@ -147,7 +207,7 @@ vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel
         vec3 lifted = v3_add(p, v3_scale(n, 2.0f * threshold));
         radiance = v3_add(radiance, v3_mul(throughput, direct_light(p, lifted, n, to_eye, eye, albedo, diffuse_weight,
                                                                      glossy_weight, alpha, active, key,
-                                                                     1000u + (uint)bounce * 64u, pixel_angle, params)));
+                                                                     1000u + (uint)bounce * 256u, pixel_angle, params)));
         // one lobe, chosen by its weight, samples the next direction; the
         // throughput takes the lobe's f cos / pdf (its weight cancels)
         uint first = (uint)bounce * 4u + 1u;
@@ -200,6 +260,11 @@ vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel
         active = active & (max(throughput.x, max(throughput.y, throughput.z)) > 0.0f);
         m = march(start, scattered, active, pixel_angle, 0.0f, params);
         mask escaped = active & !m.hit;
+#if ENVIRONMENT_MAP
+        // a map's light reaches diffuse and glossy surfaces by next-event
+        // estimation alone: only mirror and glass paths count what they escape to
+        escaped = escaped & !diffuse & !glossy;
+#endif
         radiance = v3_add(radiance, v3_mul(throughput, v3_scale(environment(scattered),
                                                                 SELECT((real)0.0f, (real)1.0f, escaped))));
         active = active & m.hit;

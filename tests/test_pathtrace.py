@@ -317,3 +317,51 @@ def test_a_glass_ball_shows_the_wall_behind_it_refracted_as_the_direct_renderer_
                       (np.abs(rgb - 1) < 0.05).all(axis=-1)], [1, -1, 0], 9)
     agree = (seen == expected)[clear].mean()
     assert clear.sum() > 300 and agree > 0.97, agree
+
+
+def write_map(path, pixels):
+    import OpenImageIO as oiio
+    output = oiio.ImageOutput.create(str(path))
+    output.open(str(path), oiio.ImageSpec(pixels.shape[1], pixels.shape[0], 3, oiio.FLOAT))
+    output.write_image(np.ascontiguousarray(pixels, dtype=np.float32))
+    output.close()
+
+
+@pytest.mark.parametrize("build", [{}, {"lanes": 1}, {"precision": "double"}])
+def test_a_uniform_environment_map_is_a_white_furnace_too(tmp_path, build):
+    write_map(tmp_path / "white.exr", np.ones((16, 32, 3)))
+    scene = fractalc.loads(furnace(0.5).checked.source.replace(UNIFORM, ""), **build)
+    image = scene.render(samples=64, environment_map=str(tmp_path / "white.exr"))
+    covered = image.rgba[..., 3] == 1
+    values = image.rgba[..., 0][covered]
+    # directions drawn from the map: each sample is 0.5 * 2 cos, its mean 0.5
+    assert abs(values.mean() - 0.5) < 3 * values.std() / math.sqrt(values.size) + 1e-3
+    assert np.all(image.rgba[..., 0][image.rgba[..., 3] == 0] == 1), "misses see the map"
+
+
+def test_importance_sampling_a_sharp_sun_beats_sampling_by_solid_angle(tmp_path, monkeypatch):
+    from fractalc import pathtrace
+    sky = np.zeros((64, 128, 3)) + np.array([0.1, 0.15, 0.3]) * np.linspace(1, 0.2, 64)[:, None, None]
+    sky[10:12, 80:82] = 3000.0          # a sun of 2 x 2 texels, 5.6 degrees across
+    write_map(tmp_path / "sun.exr", sky)
+    text = """
+    material m { color: (0.7, 0.7, 0.7), specular: 0.2, shininess: 20 }
+    scene sphere(1).material(m) | plane(offset: -1).material(m)
+    camera { position: (0, -4, 1), target: (0, 0, 0), fov: 50 }
+    render { width: 24, height: 16, integrator: path, bounces: 2 }
+    """
+    keys = {"environment_map": str(tmp_path / "sun.exr"), "samples": 16}
+    reference = fractalc.loads(text).render(**{**keys, "samples": 1024}, seed=99).rgba[..., :3]
+
+    def error(seed):
+        image = fractalc.loads(text).render(**keys, seed=seed).rgba[..., :3]
+        return np.sqrt(((image - reference) ** 2).mean())
+    importance = np.mean([error(seed) for seed in range(3)])
+    monkeypatch.setattr(pathtrace, "IMPORTANCE", False)
+    by_solid_angle = np.mean([error(seed) for seed in range(3)])
+    assert by_solid_angle > 3 * importance, (importance, by_solid_angle)
+
+
+def test_an_unreadable_environment_map_is_a_value_error(tmp_path):
+    with pytest.raises(ValueError, match="cannot read the environment map"):
+        fractalc.loads(SCENE).render(environment_map=str(tmp_path / "missing.exr"))
