@@ -104,6 +104,33 @@ def test_ambient_occlusion_of_an_open_surface_takes_one_evaluation():
     assert np.all(image.passes["ao"][np.isfinite(image.depth)] == 1.0)
 
 
+def shadow_steps(height: float, sine: float, threshold: float, reach: float, factor: float) -> int:
+    """Evaluations of a shadow ray leaving a plane from `height` above it
+    toward a light at elevation asin(sine), stepping `factor` times the
+    distance (it only grows along this ray: no step overshoots)."""
+    t, lifted, steps = 2 * threshold, height + 2 * threshold, 0
+    while t < reach:
+        steps += 1
+        t += factor * max(lifted + t * sine, threshold)
+    return steps
+
+
+def test_a_shadow_ray_leaving_a_plane_takes_the_over_relaxed_steps():
+    # one pixel looking down at the ground, the light 30 degrees above it
+    scene = fractalc.loads("""
+        scene plane(offset: 0)
+        camera { position: (0, -2, 2), target: (0, 0, 0) }
+        light directional { direction: (0, -0.8660254037844386, -0.5), shadows: hard }
+        render { width: 1, height: 1, epsilon: 0.001, max_distance: 5, dither: 0 }
+        """)
+    counts, image = count(scene), scene.render()
+    height = 2 - float(image.depth[0, 0]) / math.sqrt(2)     # of the hit, below the threshold
+    assert 0 <= height < 1e-3
+    relaxed, plain = (shadow_steps(height, 0.5, 1e-3, 5.0, factor) for factor in (1.6, 1.0))
+    assert counts.evaluations["shadows"] == relaxed < plain
+    assert image.rgba[0, 0, 0] > 0.5       # lit
+
+
 def test_formula_iterations_are_counted_for_the_rays_evaluated():
     counts = count(fractalc.loads(BULB))
     per_evaluation = counts.iterations / counts.total
