@@ -806,14 +806,14 @@ class _Checker:
             return None
         found = self.entries(decl.block, keys, "light")
         vector_key = "direction" if decl.kind == "directional" else "position"
-        needed = (vector_key, "direction") if decl.kind == "spot" else (vector_key,)
+        needed = (vector_key, "direction") if decl.kind in ("spot", "rectangle") else (vector_key,)
         if any(key not in found for key in needed):
             for key in needed:
                 if not any(e.key == key for e in decl.block.entries):
                     self.error(decl.span, f"a {decl.kind} light needs '{key}'")
             return None
         vector = found.pop(vector_key)
-        if decl.kind == "sphere":    # the direct renderer's stand-in for its soft shadow
+        if decl.kind in ("sphere", "rectangle"):    # the direct renderer's stand-in for their soft shadows
             found.setdefault("shadows", "soft")
         return Light(decl.kind, vector, **found)
 
@@ -933,7 +933,9 @@ LIGHT_KEYS = {"directional": _keys(_P("direction", "vec3", None, "nonzero"), *_L
               "point": _keys(_P("position", "vec3"), *_LIGHT_COMMON),
               "spot": _keys(_P("position", "vec3"), _P("direction", "vec3", None, "nonzero"), *_LIGHT_COMMON,
                             _P("angle", "num", None, ">0", "<180"), _P("falloff", "num", None, ">=0", "<=180")),
-              "sphere": _keys(_P("position", "vec3"), _P("radius", "num", None, ">0"), *_LIGHT_COMMON)}
+              "sphere": _keys(_P("position", "vec3"), _P("radius", "num", None, ">0"), *_LIGHT_COMMON),
+              "rectangle": _keys(_P("position", "vec3"), _P("direction", "vec3", None, "nonzero"),
+                                 _P("width", "num", None, ">0"), _P("height", "num", None, ">0"), *_LIGHT_COMMON)}
 BLOCK_KEYS = {
     "block:glow": (_keys(_P("color", "vec3", None, ">=0"), _P("strength", "num", None, ">=0"),
                          _P("radius", "num", None, ">0")), Glow()),

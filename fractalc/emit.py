@@ -346,6 +346,10 @@ def _light_block(index: int, light: Light, bound, transparent: bool, passes: boo
                   f"fmin(1.0f / (reach * reach), {literal(MAX_INVERSE_SQUARE)}));"]
     if light.kind == "spot":
         lines += _spot_lines(light, "radiance", "to_light", "        ")
+    if light.kind == "rectangle":    # lights one side: the cosine at the light
+        length = sum(c * c for c in light.direction) ** 0.5
+        facing = _vector(tuple(c / length for c in light.direction))
+        lines.append(f"        radiance = v3_scale(radiance, max(-v3_dot(to_light, {facing}), 0.0f));")
     needs = set()
     if bound is not None and light.shadows != "none":
         # past the scene's bounding sphere nothing can block the light, nor

@@ -13,20 +13,21 @@ import numpy as np
 from .program import CheckedScene
 from .resources import resource_dir
 
-LIGHT_KINDS = {"directional": 0, "point": 1, "spot": 3, "sphere": 4}
+LIGHT_KINDS = {"directional": 0, "point": 1, "spot": 3, "sphere": 4, "rectangle": 5}
 HEADLIGHT = 2          # no lights in the scene: a light at the eye
-LIGHT_STRIDE = 13      # numbers per light in the kernel's LIGHTS table
+LIGHT_STRIDE = 19      # numbers per light in the kernel's LIGHTS table
 MAX_IRRADIANCE = 1e20  # light values stay within float's range
 
 
 def _light_row(kind: int, vector, color, intensity: float, shadows: bool,
-               axis=(0.0, 0.0, -1.0), cone=(-1.0, -1.0)) -> list[float]:
+               axis=(0.0, 0.0, -1.0), cone=(-1.0, -1.0), edges=(0.0,) * 6) -> list[float]:
     """kind, the direction toward the light or its position, irradiance
     (pi colour intensity: a white diffuse surface facing the light shows
     colour intensity, as in the direct renderer), whether it casts
-    shadows, and a spot's unit axis and cone cosines (outer, inner)."""
+    shadows, a spot's unit axis and cone cosines (outer, inner), and a
+    rectangle's two edges."""
     irradiance = [min(math.pi * c * intensity, MAX_IRRADIANCE) for c in color]
-    return [float(kind), *vector, *irradiance, 1.0 if shadows else 0.0, *axis, *cone]
+    return [float(kind), *vector, *irradiance, 1.0 if shadows else 0.0, *axis, *cone, *edges]
 
 
 def lights_table(scene: CheckedScene) -> list[list[float]]:
@@ -40,8 +41,9 @@ def lights_table(scene: CheckedScene) -> list[list[float]]:
         inner, outer = light.cone_cosines()
         # a spot's cone cosines, or a sphere light's radius
         cone = (light.radius, 0.0) if light.kind == "sphere" else (outer, max(inner, outer + 1e-6))
+        edges = sum(light.rectangle_edges(), ()) if light.kind == "rectangle" else (0.0,) * 6
         rows.append(_light_row(LIGHT_KINDS[light.kind], vector, light.color, light.intensity,
-                               light.shadows != "none", tuple(c / length for c in light.direction), cone))
+                               light.shadows != "none", tuple(c / length for c in light.direction), cone, edges))
     if not rows and scene.render.environment is None and scene.render.environment_map is None:
         # nothing lights the scene: a headlight
         rows.append(_light_row(HEADLIGHT, (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 1.0, True))

@@ -167,6 +167,20 @@ class Light:
     angle: float = 30.0         # spot: full brightness within this angle of the axis, degrees
     falloff: float = 10.0       # spot: then fading to none over this many degrees more
     radius: float = 0.25        # sphere: the light's radius
+    width: float = 1.0          # rectangle: its size along `right` ...
+    height: float = 1.0         # ... and along `up` (rectangle_edges)
+
+    def rectangle_edges(self) -> tuple[Vector3, Vector3]:
+        """A rectangle light's edges, width along `right` (horizontal, across
+        `direction`; along x where `direction` is vertical) and height along
+        `up` = right x direction: (width * right, height * up)."""
+        length = math.sqrt(sum(c * c for c in self.direction))
+        n = [c / length for c in self.direction]
+        right = (n[1], -n[0], 0.0) if abs(n[2]) < 0.999999 else (1.0, 0.0, 0.0)
+        across = math.sqrt(sum(c * c for c in right))
+        right = [c / across for c in right]
+        up = (right[1] * n[2] - right[2] * n[1], right[2] * n[0] - right[0] * n[2], right[0] * n[1] - right[1] * n[0])
+        return tuple(self.width * c for c in right), tuple(self.height * c for c in up)
 
     def cone_cosines(self) -> tuple[float, float]:
         """A spot's cosines of the angle where its light starts fading

@@ -8,13 +8,14 @@
 //                           then has through_solid)
 //   LIGHT_COUNT, LIGHTS[]   LIGHT_STRIDE numbers per light: kind (0
 //                           directional, 1 point, 2 the headlight, 3 spot,
-//                           4 sphere),
+//                           4 sphere, 5 rectangle),
 //                           its direction toward the light or its position,
 //                           irradiance (pi colour intensity: a white diffuse
 //                           surface facing it shows colour intensity, as in
 //                           the direct renderer), shadows (1 or 0), a
 //                           spot's axis and its cone's outer and inner
-//                           cosines, or a sphere's radius (at 11)
+//                           cosines, or a sphere's radius (at 11), and a
+//                           rectangle's edges (13 to 18)
 // Paths scatter off surfaces in a loop (no recursion): at each hit, light
 // from every light by next-event estimation (shadow rays), then one new
 // direction sampled from the surface's lobes; the environment is reached by
@@ -138,6 +139,20 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
                 falloff = SELECT(2.0f * (1.0f - cos_max) / (radius * radius), (real)0.0f, reach <= radius);
                 reach = reach * cos_t - sqrt(max(radius * radius - reach * reach * sin_t * sin_t, 0.0f));
                 to_light = around_normal(to_light, v3(sin_t * cos(angle), sin_t * sin(angle), cos_t));
+            }
+            if (light[0] == 5.0f) {
+                // a rectangle of radiance irradiance / area, lighting the side
+                // its axis faces: a point uniform on it, weighted by the
+                // cosine there over the squared distance
+                real s = sample_random(key, first + 2u * (uint)i) - 0.5f;
+                real t = sample_random(key, first + 2u * (uint)i + 1u) - 0.5f;
+                vec3 point = v3_add(vector, v3_add(v3_scale(v3(light[13], light[14], light[15]), s),
+                                                   v3_scale(v3(light[16], light[17], light[18]), t)));
+                vec3 offset = v3_sub(point, p);
+                reach = v3_length(offset);
+                to_light = v3_scale(offset, 1.0f / max(reach, (real)1e-30f));
+                real facing = -v3_dot(to_light, v3(light[8], light[9], light[10]));
+                falloff = fmin(max(facing, 0.0f) / (reach * reach), 1e8f);
             }
         }
         real cosine = v3_dot(n, to_light);

@@ -142,7 +142,7 @@ def test_a_spot_light_needs_a_position_and_a_direction():
         fractalc.loads("scene sphere()\nlight spot { position: (0, 0, 3) }\nlight area { }\n")
     message = str(caught.value)
     assert "a spot light needs 'direction'" in message
-    assert "unknown light kind 'area' (known: directional, point, spot, sphere)" in message
+    assert "unknown light kind 'area' (known: directional, point, spot, sphere, rectangle)" in message
 
 
 BULB = """
