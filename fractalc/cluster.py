@@ -182,14 +182,18 @@ def _tile_task(spec: SceneSpec, seed: int, camera, first: int, count: int) -> Do
 
 
 def _render_tile(scene: Scene, render_keys: dict, seed: int, camera, first: int, count: int):
-    from . import run
+    from . import pathtrace, run
     from .passes import channels
     settings = scene._settings(render_keys)
     camera = camera or scene.checked.camera
     program, target = scene._program(settings, camera)
     frame = run.Frame(settings.width, settings.height, settings.samples, seed, run.camera_block(camera))
-    rows = run.render_rows(program, scene.device, frame, scene._param_values(), target.lanes, target.double,
-                           first, count, channels(settings.aovs))
+
+    def render_part(part):
+        return run.render_rows(program, scene.device, part, scene._param_values(), target.lanes, target.double,
+                               first, count, channels(settings.aovs))
+    # the path tracer's passes, as a local render makes them: the same pixels
+    rows = pathtrace.render_passes(render_part, frame) if settings.integrator == "path" else render_part(frame)
     return rows, (scene._metadata(settings, camera, 0.0) if first == 0 else None)
 
 
