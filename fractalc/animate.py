@@ -22,7 +22,7 @@ from . import __version__
 from .api import Scene
 from .errors import RenderError
 from .paths import camera_at, frame_times, params_at
-from .write import linear_to_srgb, replacing
+from .write import linear_to_srgb, replacing, tone_mapped
 
 
 def frame_file(pattern: str, index: int) -> str:
@@ -158,15 +158,19 @@ def render_frames(scene: Scene, pattern: str, fps: float, seed: int = 0, overwri
 
 
 def _display_pixels(file: str) -> np.ndarray:
-    """A frame file as sRGB 8-bit RGB: PNG as it is, EXR converted."""
+    """A frame file as sRGB 8-bit RGB: PNG as it is, EXR converted through
+    the exposure and tone curve its header names, as its PNG would be."""
     import OpenImageIO as oiio
     image = oiio.ImageInput.open(file)
     if image is None:
         raise RenderError(f"cannot read {file}: {oiio.geterror()}")
     pixels = np.asarray(image.read_image(oiio.FLOAT))[..., :3]
+    spec = image.spec()
     image.close()
     if file.lower().endswith(".exr"):
-        pixels = linear_to_srgb(pixels)
+        exposure = float(spec.get_string_attribute("fractalc:render.exposure", "0"))
+        curve = spec.get_string_attribute("fractalc:render.tonemap", "none")
+        pixels = linear_to_srgb(tone_mapped(pixels, exposure, curve))
     return np.round(np.clip(pixels, 0.0, 1.0) * 255.0).astype(np.uint8)
 
 

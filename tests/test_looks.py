@@ -226,3 +226,13 @@ def test_the_direct_renderer_shows_the_environment_where_rays_miss_and_in_mirror
     near = ~below | (1.5 / np.abs(dirs[..., 2]) < 10)
     assert (below & near).sum() > 100
     np.testing.assert_allclose(image.rgba[..., :3][near], expected[near], atol=2e-4)
+
+
+def test_an_mp4_made_from_exr_frames_shows_them_as_their_pngs(tmp_path):
+    from fractalc.animate import _display_pixels
+    image = fractalc.loads(SCENE).render(exposure=1.5, tonemap="aces")
+    image.save(str(tmp_path / "frame.exr"))
+    image.save(str(tmp_path / "frame.png"))
+    from_exr, from_png = _display_pixels(str(tmp_path / "frame.exr")), _display_pixels(str(tmp_path / "frame.png"))
+    assert np.abs(from_exr.astype(int) - from_png.astype(int)).max() <= 1
+    assert from_exr[0, 0, 0] > round(srgb(0.2) * 255) + 30, "brighter than the radiance as rendered"
