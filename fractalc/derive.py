@@ -144,20 +144,29 @@ def gradient_length(z, rows) -> ir.Expr:
     return ir.op("sqrt", total)
 
 
-def escape_time_estimate(z, rows) -> ir.Expr:
-    """0.5 r ln r / |grad r| = 0.5 r^2 ln r / |J^T z| (0 where r = 0)."""
+def finite_estimate(numerator: ir.Expr, denominator: ir.Expr) -> ir.Expr:
+    """numerator / denominator within +-1e30, and 0 where the denominator
+    is 0 (r = 0, or a point where z does not move with the point: there
+    the estimate says nothing, and 0 never oversteps)."""
+    de = ir.op("clamp", ir.div(numerator, denominator), ir.const(-1e30), ir.const(1e30))
+    return ir.op("select", ir.op("eq", denominator, ir.const(0.0)), ir.const(0.0), de)
+
+
+def _squared_length(z) -> ir.Expr:
     r2 = None
     for value in z:
         r2 = ir.mul(value, value) if r2 is None else ir.add(r2, ir.mul(value, value))
-    r = ir.op("sqrt", r2)
-    de = ir.div(ir.mul(ir.mul(ir.const(0.5), r2), ir.op("log", r)), gradient_length(z, rows))
-    return ir.op("select", ir.op("eq", r, ir.const(0.0)), ir.const(0.0), ir.op("min", de, ir.const(1e30)))
+    return r2
+
+
+def escape_time_estimate(z, rows) -> ir.Expr:
+    """0.5 r ln r / |grad r| = 0.5 r^2 ln r / |J^T z|."""
+    r2 = _squared_length(z)
+    return finite_estimate(ir.mul(ir.mul(ir.const(0.5), r2), ir.op("log", ir.op("sqrt", r2))),
+                           gradient_length(z, rows))
 
 
 def linear_estimate(z, rows, offset: ir.Expr = ir.const(0.0)) -> ir.Expr:
     """(r - offset) / |grad r| = (r - offset) r / |J^T z|."""
-    r2 = None
-    for value in z:
-        r2 = ir.mul(value, value) if r2 is None else ir.add(r2, ir.mul(value, value))
-    r = ir.op("sqrt", r2)
-    return ir.div(ir.mul(ir.sub(r, offset), r), gradient_length(z, rows))
+    r = ir.op("sqrt", _squared_length(z))
+    return finite_estimate(ir.mul(ir.sub(r, offset), r), gradient_length(z, rows))

@@ -119,11 +119,21 @@ def split(decl: ast.FormulaDecl, file: str = "<string>") -> Formula:
     for statement in decl.body:
         phase = statement.phase if isinstance(statement, ast.Assign) else "step"
         phases[phase].append(statement)
-        for inner in _nested(statement):
-            if isinstance(inner, ast.Assign) and inner.phase != "step":
+        for inner in (statement, *_nested(statement)):
+            if not isinstance(inner, ast.Assign):
+                continue
+            if inner is not statement and inner.phase != "step":
                 raise Mistake(inner.span, f"'{inner.phase}' goes at the top of a formula, not inside 'if'")
+            own = _RESERVED.get(inner.name)
+            if own is not None and inner.phase != own:
+                where = {"step": "a step line (no 'init' or 'final')", "final": "a 'final' line"}[own]
+                raise Mistake(inner.name_span, f"'{inner.name}' is set in {where}")
     return Formula(decl.name, tuple(p.name for p in decl.params), tuple(phases["init"]),
                    tuple(phases["step"]), tuple(phases["final"]), decl.span, file)
+
+
+# names with a meaning, and the phase that sets them
+_RESERVED = {"stop": "step", "trap": "step", "distance": "final"}
 
 
 def _nested(statement) -> list:
@@ -248,7 +258,11 @@ class Interpreter:
                 raise Mistake(e.span, "a comparison cannot be negated (swap the comparison instead)")
             return replace(v, items=tuple(ir.neg(x) for x in v.items))
         if isinstance(e, ast.Binary):
-            return self.binary(e, self.expr(e.left, env), self.expr(e.right, env))
+            left, right = self.expr(e.left, env), self.expr(e.right, env)
+            try:
+                return self.binary(e, left, right)
+            except (ValueError, ZeroDivisionError, OverflowError):
+                raise Mistake(e.span, f"'{e.op}' is undefined for these values") from None
         if isinstance(e, ast.Field):
             return self.field(e, self.expr(e.receiver, env))
         if isinstance(e, ast.Call):
@@ -307,10 +321,7 @@ class Interpreter:
         size = max(len(a.items), len(b.items))
         left = a.items * size if a.type == "num" else a.items
         right = b.items * size if b.type == "num" else b.items
-        try:
-            items = tuple(ir.op(op, x, y) for x, y in zip(left, right))
-        except (ValueError, ZeroDivisionError, OverflowError):
-            raise Mistake(e.span, f"'{op}' is undefined for these values") from None
+        items = tuple(ir.op(op, x, y) for x, y in zip(left, right))
         underivable = a.underivable or b.underivable
         kind = "num" if size == 1 and a.type == "num" and b.type == "num" else f"vec{size}"
         if op in ("+", "-"):
@@ -322,6 +333,8 @@ class Interpreter:
             else:
                 form = _summed_form(a.form, b.form)
             return Value(kind, items, form, max(a.degree, b.degree), underivable)
+        if op == "/" and any(ir.is_const(x) and x.value == 0.0 for x in b.items):
+            raise Mistake(e.span, "division by zero")
         if op == "*" or op == "/":
             degree = a.degree + b.degree if op == "*" else a.degree - b.degree
             if a.independent and b.independent:
@@ -716,7 +729,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
         offset = args[0].items[0] if args else ZERO
         if args and (len(args) > 1 or args[0].type != "num"):
             raise Mistake(span, f"'{name}' takes at most one number (the linear estimate's offset)")
-        return number(_estimate(name == "escape_time_estimate", z_final, dr, point, use_scalar, offset))
+        return number(_estimate(name == "escape_time_estimate", z_final, dr, point, use_scalar, offset, span))
 
     last = uses[-1]
     if last.formula.final:
@@ -731,20 +744,25 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
             raise Mistake(where.value.span, f"'distance' must be a number, this is {_word(distance)}")
         de = distance.items[0]
     else:
-        de = _estimate(escape, z_final, dr, point, use_scalar, ZERO)
+        de = _estimate(escape, z_final, dr, point, use_scalar, ZERO, _last_z(uses[-1].formula).span)
     return Orbit(de, traps, use_scalar)
 
 
-def _estimate(escape: bool, z, dr, point, scalar: bool, offset: ir.Expr) -> ir.Expr:
+def _estimate(escape: bool, z, dr, point, scalar: bool, offset: ir.Expr, where: Span) -> ir.Expr:
     if not scalar:
-        rebuilt, rows = derive.jacobian(z, point)
+        try:
+            rebuilt, rows = derive.jacobian(z, point)
+        except (ValueError, ZeroDivisionError, OverflowError):
+            # a rule meeting constants outside its domain: 1 / 0 in the derivative of x / 0, of sqrt(0), ...
+            raise Mistake(where, "the derivative of this step is undefined for its constants (a division by "
+                                 "zero, or sqrt, log, asin or acos at the end of their domain)") from None
         return derive.escape_time_estimate(rebuilt, rows) if escape else \
             derive.linear_estimate(rebuilt, rows, offset)
     r = ir.length(z)
     if escape:
-        de = ir.div(ir.mul(ir.mul(ir.const(0.5), ir.op("log", r)), r), ir.op("abs", dr))
-        return ir.op("select", ir.op("eq", r, ZERO), ZERO, ir.op("min", de, ir.const(1e30)))
-    return ir.div(ir.sub(r, offset), ir.op("abs", dr))
+        estimate = derive.finite_estimate(ir.mul(ir.mul(ir.const(0.5), ir.op("log", r)), r), ir.op("abs", dr))
+        return ir.op("select", ir.op("eq", r, ZERO), ZERO, estimate)
+    return derive.finite_estimate(ir.sub(r, offset), ir.op("abs", dr))
 
 
 def _inside(z, bailout: ir.Expr) -> ir.Expr:

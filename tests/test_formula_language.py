@@ -76,6 +76,12 @@ MISTAKES = [
      "'else' goes on the line of the '}' that ends its 'if'"),
     ("formula f() {\n    stop = z.x < 1 < 2\n    z = z + c\n}\nscene fractal(f())", "2:20",
      "comparisons do not chain"),
+    ("formula f() {\n    init stop = (z, 1)\n    z = z + c\n    final d = stop\n}\nscene fractal(f())", "2:10",
+     "'stop' is set in a step line"),
+    ("formula f() {\n    distance = 1\n    z = z + c\n}\nscene fractal(f())", "2:5", "'distance' is set in a 'final' line"),
+    ("formula f() {\n    z = z / 0 + c\n}\nscene fractal(f())", "2:9", "division by zero"),
+    ("formula f() {\n    z = z * pow(0, z.x) + c\n}\nscene fractal(f())", "2:5",
+     "the derivative of this step is undefined for its constants"),
 ]
 
 
@@ -289,3 +295,12 @@ def test_step_scales_the_estimate_to_its_safe_factor(tmp_path):
     halved = fractalc.loads(text.format(step=", step: 0.5")).distance(points)
     np.testing.assert_allclose(halved, plain * 0.5, rtol=1e-6)
     assert "'step' of 'fractal' must be at most 1, not 1.5" in _error(text.format(step=", step: 1.5"))
+
+
+def test_an_estimate_where_z_does_not_move_with_the_point_is_zero_not_infinite():
+    """At the origin z * z.x has a zero Jacobian (Julia mode: c does not
+    move either): 0.5 r^2 ln r / 0 would be -inf; the estimate is 0 there
+    and finite everywhere."""
+    scene = fractalc.loads("formula f() {\n    z = z * z.x + c\n}\nscene fractal(f(), julia: (0.1, 0.2, 0.3))")
+    d = scene.distance(np.array([[0, 0, 0], [0.1, 0.2, 0.3], [1e6, 0, 0]]))
+    assert d[0] == 0 and np.all(np.isfinite(d)) and d[2] > 1e3
