@@ -569,7 +569,7 @@ class Use:
 @dataclass(frozen=True)
 class Orbit:
     distance: ir.Expr
-    trap: tuple[ir.Expr, ...]       # origin, |x|, |y|, |z| (empty unless asked for)
+    trap: tuple[ir.Expr, ...]       # origin, |x|, |y|, |z|, the steps taken (empty unless asked for)
     scalar: bool                    # the estimate from a scalar running derivative (else the Jacobian or own)
 
 
@@ -656,7 +656,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
     # hybrid and the orbit trap
     layout = [("z", dims), *(((k, name), len(v.items)) for k, values in enumerate(carried)
                             for name, v in values.items())]
-    layout += [("dr", 1)] * use_scalar + [("stopped", 1)] + [("counter", 1)] * (period > 1) + [("trap", 4)] * trap
+    layout += [("dr", 1)] * use_scalar + [("stopped", 1)] + [("counter", 1)] * (period > 1) + [("trap", 4), ("steps", 1)] * trap
 
     def unpack(state) -> dict:
         fields, i = {}, 0
@@ -695,6 +695,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
                 kept["dr"] = (ir.op("min", ir.add(ir.mul(a, fields["dr"][0]), b), ir.const(MAX_DERIVATIVE)),)
             if trap:   # `trap = point`: where the orbit trap measures (else z)
                 kept["trap"] = _trap_added(fields["trap"], out["trap"].items if "trap" in out else moved.items)
+                kept["steps"] = (ir.add(fields["steps"][0], ONE),)
             for key, items in kept.items():
                 fields[key] = tuple(ir.op("select", ok, a, b) for a, b in zip(items, fields[key]))
             stopped = ir.op("or", stopped, ir.op("and", going, ir.op("not", ok)))
@@ -707,7 +708,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
         return pack(fields)
 
     start = {"z": z.items, **{(k, name): v.items for k, values in enumerate(carried) for name, v in values.items()},
-             "dr": (ONE,), "stopped": (ir.Const(0.0, ir.MASK),), "counter": (ZERO,), "trap": (ir.const(1e30),) * 4}
+             "dr": (ONE,), "stopped": (ir.Const(0.0, ir.MASK),), "counter": (ZERO,), "trap": (ir.const(1e30),) * 4, "steps": (ZERO,)}
     count = iterations if period == 1 else ir.op("floor", ir.div(ir.add(iterations, ir.const(period - 1.0)),
                                                                    ir.const(float(period))))
     stops = any(_assignment(use.formula, "stop") for use in uses)
@@ -723,7 +724,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
     z_final = fields["z"]
     finals = [formula_values(fields, k, False) for k in range(len(carried))]
     dr = fields["dr"][0] if use_scalar else None
-    traps = fields["trap"] if trap else ()
+    traps = (*fields["trap"], *fields["steps"]) if trap else ()
 
     def derived(name: str, args: list[Value], span: Span) -> Value:
         offset = args[0].items[0] if args else ZERO

@@ -23,7 +23,7 @@ Vector = tuple[ir.Expr, ...]
 @dataclass(frozen=True)
 class Orbit:
     distance: ir.Expr
-    trap: tuple[ir.Expr, ...]      # origin, |x|, |y|, |z| (empty: not asked for)
+    trap: tuple[ir.Expr, ...]      # origin, |x|, |y|, |z|, the steps taken (empty: not asked for)
 
 
 def _formula(name: str, point: Vector, args: tuple, iterations: ir.Expr, bailout: ir.Expr | None,

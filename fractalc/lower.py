@@ -74,10 +74,12 @@ class SceneIR:
     bound: Bound | None = None   # where the whole scene can be (uniform)
 
 
-def _trap_colored(surface: Surface, coloring: Coloring, traps) -> Surface:
-    """Orbit-trap colour: mix(near, far, clamp(trap * scale, 0, 1))."""
-    trap = ir.op("min", traps[1], ir.op("min", traps[2], traps[3])) if coloring.trap == "planes" \
-        else traps[("origin", "x", "y", "z").index(coloring.trap)]
+def _trap_colored(surface: Surface, coloring: Coloring, traps, point: Point) -> Surface:
+    """Orbit-trap colour: mix(near, far, clamp(trap * scale, 0, 1)), or a
+    cosine palette of trap * scale."""
+    trap = {"planes": lambda: ir.op("min", traps[1], ir.op("min", traps[2], traps[3])),
+            "radius": lambda: ir.length(point), "height": lambda: point[2]}.get(
+        coloring.trap, lambda: traps[("origin", "x", "y", "z", "iterations").index(coloring.trap)])()
     if coloring.palette is not None:
         rgb = cosine_palette(coloring.palette, ir.mul(trap, coloring.scale)).items
     else:
@@ -225,7 +227,7 @@ class _Lowerer:
         surface, coloring = look
         if coloring is None or s.signature.kind != "fractal":
             return surface
-        return _trap_colored(surface, coloring, orbit(s.signature.name, point, s.args, trap=True).trap)
+        return _trap_colored(surface, coloring, orbit(s.signature.name, point, s.args, trap=True).trap, point)
 
     @staticmethod
     def fractal(s: Fractal, point: Point) -> ir.Expr:
@@ -241,7 +243,7 @@ class _Lowerer:
         if coloring is None:
             return surface
         return _trap_colored(surface, coloring, formula_code.orbit(s.sequence, point, s.iterations, s.bailout,
-                                                                   s.julia, trap=True).trap)
+                                                                   s.julia, trap=True).trap, point)
 
     @staticmethod
     def combination(s: Combination, lowered: list):

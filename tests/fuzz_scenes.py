@@ -118,7 +118,7 @@ EFFECT_BLOCKS = {
     "fog": {"color": ("vec3", NON_NEGATIVE), "density": ("num", NON_NEGATIVE)},
     "slice": {"normal": ("vec3", Range(nonzero=True)), "offset": ("num", ANY)},
 }
-TRAPS = ("origin", "x", "y", "z", "planes")
+TRAPS = ("origin", "x", "y", "z", "planes", "iterations", "radius", "height")
 WORDS = ("param", "let", "material", "scene", "camera", "light", "render", "path", "in", "union", "intersect",
          "subtract", "smooth", "orbit_trap", "pixel", "directional", "point", "shadows", "soft", "hard",
          "none", *PRIMITIVES, *FRACTALS, *TRANSFORMS, "material", "color", *MATERIAL_KEYS, *RENDER_KEYS,

@@ -236,3 +236,38 @@ def test_an_mp4_made_from_exr_frames_shows_them_as_their_pngs(tmp_path):
     from_exr, from_png = _display_pixels(str(tmp_path / "frame.exr")), _display_pixels(str(tmp_path / "frame.png"))
     assert np.abs(from_exr.astype(int) - from_png.astype(int)).max() <= 1
     assert from_exr[0, 0, 0] > round(srgb(0.2) * 255) + 30, "brighter than the radiance as rendered"
+
+
+def _numpy_bulb_steps(points, iterations=8, bailout=2.0):
+    """The steps the contract's power-8 Mandelbulb orbit takes before |z|
+    passes the bailout (checked before each step), in float64."""
+    z, steps = points.copy(), np.zeros(len(points))
+    for _ in range(iterations):
+        r = np.linalg.norm(z, axis=1)
+        going = r <= bailout
+        with np.errstate(all="ignore"):
+            theta = np.where(r == 0, 0, np.arccos(np.clip(z[:, 2] / r, -1, 1))) * 8
+        phi = np.arctan2(z[:, 1], z[:, 0]) * 8
+        moved = (r ** 8)[:, None] * np.stack([np.sin(theta) * np.cos(phi), np.sin(phi) * np.sin(theta),
+                                              np.cos(theta)], axis=1) + points
+        z = np.where(going[:, None], moved, z)
+        steps += going
+    return steps
+
+
+def test_colour_by_iteration_count_and_by_position():
+    """trap: iterations counts the orbit's steps (the same loop), radius and
+    height read the point: black-to-white ramps show t itself."""
+    ramp = "orbit_trap(near: (0, 0, 0), far: (1, 1, 1), trap: {kind}, scale: {scale})"
+    image = fractalc.loads(BULB.replace("COLORING", ramp.format(kind="iterations", scale=0.125))).render(
+        aovs=["albedo", "P"])
+    fractal = np.isfinite(image.depth) & (np.linalg.norm(image.passes["P"], axis=-1) < 1.3)   # not the ball
+    counted = image.passes["albedo"][fractal][:, 0] * 8
+    expected = _numpy_bulb_steps(image.passes["P"][fractal].astype(float))
+    assert fractal.sum() > 100 and len(np.unique(np.round(counted))) > 1
+    assert np.mean(np.abs(counted - expected) < 1e-3) > 0.95      # hit points on a boundary may count one more
+    for kind, of_point in (("radius", lambda p: np.linalg.norm(p, axis=1)), ("height", lambda p: p[:, 2])):
+        image = fractalc.loads(BULB.replace("COLORING", ramp.format(kind=kind, scale=0.5))).render(
+            aovs=["albedo", "P"])
+        t = np.clip(0.5 * of_point(image.passes["P"][fractal].astype(float)), 0, 1)
+        np.testing.assert_allclose(image.passes["albedo"][fractal][:, 0], t, atol=2e-3)
