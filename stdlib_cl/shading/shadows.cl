@@ -100,7 +100,7 @@ real lowest_ratio(vec3 origin, vec3 to_light, real a, real b, real c, real ratio
 // surfaces). So a local minimum of the samples' d / t, where the light may
 // be dimmed (k d / t < 2: by the distance's slope of at most 1, less than
 // half the sample's d / t cannot lie between its neighbours), is refined
-// (`lowest_ratio`). Over-relaxed as `hard_shadow` is: an overshooting
+// (`lowest_ratio`). Over-relaxed as the hard-shadow march is: an overshooting
 // sample (its sphere and the last one's do not overlap) still dims the light
 // by its d / t, but the samples of the dip test are the ones stepped from.
 real soft_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, real k, mask active,
