@@ -166,6 +166,12 @@ class Viewer:
             lines.append(f"    aperture: {_number(camera.aperture)}")
         if camera.focus is not None:
             lines.append(f"    focus: {_number(camera.focus)}")
+        # the projection and stereo keys where they are not the defaults
+        default = Camera()
+        for key, show in (("projection", str), ("fisheye_fov", _number), ("stereo", str),
+                          ("eye_separation", _number)):
+            if getattr(camera, key) != getattr(default, key):
+                lines.append(f"    {key}: {show(getattr(camera, key))}")
         return "camera {\n" + "\n".join(lines) + "\n}"
 
     # ---- input -------------------------------------------------------------

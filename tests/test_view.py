@@ -231,6 +231,18 @@ def test_c_prints_the_camera_as_a_block_that_reproduces_it(scene_file):
     assert camera.fov == viewer.camera.fov
 
 
+def test_c_keeps_the_cameras_projection_and_stereo_keys(scene_file):
+    scene_file.write_text(scene_file.read_text().replace(
+        "fov: 40 }", "fov: 40, projection: fisheye, fisheye_fov: 200, stereo: side_by_side }"))
+    viewer = viewer_of(scene_file)
+    press(viewer, pygame.K_c)
+    block = viewer.out.getvalue()
+    text = SCENE.replace("camera { position: (0.5, -4, 1.5), target: (0, 0, -0.2), fov: 40 }", block)
+    camera = fractalc.loads(text).checked.camera
+    assert (camera.projection, camera.fisheye_fov, camera.stereo) == ("fisheye", 200.0, "side_by_side")
+    assert "eye_separation" not in block        # at its default: left out
+
+
 def test_p_saves_the_view_as_png_and_exr_with_metadata(scene_file):
     oiio = pytest.importorskip("OpenImageIO")
     viewer = viewer_of(scene_file, max_samples=PASS_SAMPLES)
