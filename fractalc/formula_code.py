@@ -595,24 +595,23 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
     others none. Raises Mistake (at `where`, the use, for the use's own
     mistakes)."""
     interpreter = Interpreter()
-    point_value = vector(point, (ONE, ZERO), 1.0)
+    uses = _unique(sequence)
 
     # init: each formula's carried values, in order; z starts as the point
-    z = point_value
+    z = vector(point, (ONE, ZERO), 1.0)
     carried: list[dict[str, Value]] = []
-    for use in _unique(sequence):
+    for use in uses:
         env = {"c": _constant(julia, z, point), **_environment(use), "z": z}
         out = interpreter.run(use.formula.init, env, _readonly(use))
         z = out["z"]
         if z.type not in ("vec3", "vec4"):
-            where = next(s for s in use.formula.init if s.name == "z")
-            raise Mistake(where.value.span, f"z must be a 3- or 4-vector, this is {_word(z)}")
+            assigned = next(s for s in use.formula.init if s.name == "z")
+            raise Mistake(assigned.value.span, f"z must be a 3- or 4-vector, this is {_word(z)}")
         carried.append({name: out[name] for name in use.formula.carried if name != "z"})
     if julia is not None and len(julia.items) != len(z.items):
         raise Mistake(where or sequence[0].formula.span, f"'julia' must be a {len(z.items)}-vector like z, "
                                                           f"not a {len(julia.items)}-vector")
     c = _constant(julia, z, point)
-    uses = _unique(sequence)
 
     # which carried values depend on the point (the scalar derivative then cannot follow them)
     dependent: list[set] = [set() for _ in uses]
@@ -651,12 +650,17 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
     steps = [(k, use) for k, use in enumerate(uses) for _ in range(_count(sequence, use))]
     period = len(steps)
     dims = len(z.items)
+    stops = any(_assignment(use.formula, "stop") for use in uses)
+    # whether a ray can stop before the last step: else nothing reads `stopped`
+    # (a ray past the overflow limit keeps its state anyway: the selects below)
+    stoppable = bailout is not None or stops or period > 1
     # the loop's carried values, by name: z, each formula's own, dr (the
     # scalar derivative), whether the ray stopped, the step count of a
     # hybrid and the orbit trap
     layout = [("z", dims), *(((k, name), len(v.items)) for k, values in enumerate(carried)
                             for name, v in values.items())]
-    layout += [("dr", 1)] * use_scalar + [("stopped", 1)] + [("counter", 1)] * (period > 1) + [("trap", 4), ("steps", 1)] * trap
+    layout += ([("dr", 1)] * use_scalar + [("stopped", 1)] * stoppable + [("counter", 1)] * (period > 1)
+               + [("trap", 4), ("steps", 1)] * trap)
 
     def unpack(state) -> dict:
         fields, i = {}, 0
@@ -676,7 +680,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
     def round_(state):
         fields = unpack(state)
         z_now = Value(z.type, fields["z"], (ONE, ZERO), 1.0)
-        (stopped,) = fields["stopped"]
+        stopped = fields["stopped"][0] if stoppable else None
         for j, (k, use) in enumerate(steps):
             # with one step per iteration the loop's condition stops the ray
             going = ir.Const(1.0, ir.MASK)
@@ -698,24 +702,26 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
                 kept["steps"] = (ir.add(fields["steps"][0], ONE),)
             for key, items in kept.items():
                 fields[key] = tuple(ir.op("select", ok, a, b) for a, b in zip(items, fields[key]))
-            stopped = ir.op("or", stopped, ir.op("and", going, ir.op("not", ok)))
+            if stoppable:
+                stopped = ir.op("or", stopped, ir.op("and", going, ir.op("not", ok)))
             if "stop" in out:               # `stop = condition`: these rays iterate no more
                 stopped = ir.op("or", stopped, ir.op("and", ok, out["stop"].items[0]))
             z_now = Value(z.type, fields["z"], (ONE, ZERO), 1.0)
-        fields["stopped"] = (stopped,)
+        if stoppable:
+            fields["stopped"] = (stopped,)
         if period > 1:
             fields["counter"] = (ir.add(fields["counter"][0], ir.const(float(period))),)
         return pack(fields)
 
     start = {"z": z.items, **{(k, name): v.items for k, values in enumerate(carried) for name, v in values.items()},
-             "dr": (ONE,), "stopped": (ir.Const(0.0, ir.MASK),), "counter": (ZERO,), "trap": (ir.const(1e30),) * 4, "steps": (ZERO,)}
+             "dr": (ONE,), "stopped": (ir.Const(0.0, ir.MASK),), "counter": (ZERO,),
+             "trap": (ir.const(1e30),) * 4, "steps": (ZERO,)}
     count = iterations if period == 1 else ir.op("floor", ir.div(ir.add(iterations, ir.const(period - 1.0)),
                                                                    ir.const(float(period))))
-    stops = any(_assignment(use.formula, "stop") for use in uses)
 
     def condition(state):
         if bailout is None and not stops:
-            return None     # a ray past the overflow limit keeps its state anyway (the selects above)
+            return None     # a hybrid's steps check `stopped` themselves
         fields = unpack(state)
         going = ir.op("not", fields["stopped"][0])
         return going if bailout is None else ir.op("and", going, _inside(fields["z"], bailout))
@@ -738,11 +744,10 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
         out = Interpreter(derived).run(last.formula.final, env, _readonly(last))
         distance = out.get("distance")
         if distance is None:
-            where = last.formula.final[-1]
-            raise Mistake(where.span, "'final' lines must set 'distance' (the estimate)")
+            raise Mistake(last.formula.final[-1].span, "'final' lines must set 'distance' (the estimate)")
         if distance.type != "num":
-            where = next(s for s in reversed(last.formula.final) if s.name == "distance")
-            raise Mistake(where.value.span, f"'distance' must be a number, this is {_word(distance)}")
+            assigned = next(s for s in reversed(last.formula.final) if s.name == "distance")
+            raise Mistake(assigned.value.span, f"'distance' must be a number, this is {_word(distance)}")
         de = distance.items[0]
     else:
         de = _estimate(escape, z_final, dr, point, use_scalar, ZERO, _last_z(uses[-1].formula).span)
@@ -815,11 +820,11 @@ def _step_values(interpreter, uses, carried, dependent, z: Value, c: Value) -> l
     """Each formula's values after one step from symbolic state, for
     their forms (which values depend on the point)."""
     results = []
-    probe_z = Value(z.type, tuple(ir.Var(f"z{i}", ir.REAL) for i in range(len(z.items))), (ONE, ZERO), 1.0)
+    probe_z = Value(z.type, tuple(ir.Var(f"z.{i}", ir.REAL) for i in range(len(z.items))), (ONE, ZERO), 1.0)
     for k, use in enumerate(uses):
         env = {"c": c, **_environment(use), "z": probe_z}
         for name, v in carried[k].items():
-            env[name] = replace(v, items=tuple(ir.Var(f"{name}{i}", ir.REAL) for i in range(len(v.items))),
+            env[name] = replace(v, items=tuple(ir.Var(f"{name}.{i}", ir.REAL) for i in range(len(v.items))),
                                 form=None if name in dependent[k] else INDEPENDENT)
         out = interpreter.run(use.formula.step, env, _readonly(use))
         if _last_z(use.formula) is None:
