@@ -18,6 +18,7 @@ from .errors import Diagnostic, SceneError, Span, diagnostic
 from .program import (DEFAULT_MATERIAL, PROJECTIONS, STEREO_LAYOUTS, Camera, CameraPath, CheckedScene, Coloring,
                       Combination, Environment, Fog, Fractal, Glow, Keyframe, Light, Material, ParamCheck, ParamInfo,
                       Primitive, RenderSettings, Shape, Slice, Transformed, WithMaterial, cosine_palette)
+from .parse import parse
 from .resources import resource_dir
 from .stdlib import COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
 
@@ -978,7 +979,6 @@ _PROBE_POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
 def library_formulas() -> tuple[tuple[str, tuple], ...]:
     """The formulas of the library (stdlib_frac/*.frac), checked: every
     scene can use them; a file's own formula of the same name replaces one."""
-    from .parse import parse          # parse imports nothing of check; kept local as a late need
     found = []
     for path in sorted(resource_dir("stdlib_frac").glob("*.frac")):
         program = parse(path.read_text(), str(path))

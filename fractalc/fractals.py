@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from . import formula_code, ir
+from .check import library_formulas
 
 Vector = tuple[ir.Expr, ...]
 
@@ -29,7 +30,6 @@ class Orbit:
 def _formula(name: str, point: Vector, args: tuple, iterations: ir.Expr, bailout: ir.Expr | None,
              trap: bool) -> Orbit:
     """The library formula NAME_formula as this fractal."""
-    from .check import library_formulas      # check reads the shapes' signatures from here
     formula = dict(library_formulas())[f"{name}_formula"][0]
     found = formula_code.orbit((formula_code.Use(formula, args),), point, iterations, bailout, trap=trap)
     return Orbit(found.distance, found.trap)
