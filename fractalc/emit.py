@@ -437,8 +437,14 @@ def _shade_function(scene_ir: SceneIR, on: dict[str, bool]) -> tuple[str, list[s
         needs.add("ambient_occlusion")
         lines.append(f"    real occlusion = ambient_occlusion(p, normal, {literal(AO_DELTA)}, "
                      f"{literal(strength)}, params);")
-    ambient = f"{literal(AMBIENT)} * occlusion" if ao else literal(AMBIENT)
-    lines.append(f"    vec3 color = v3_scale(albedo, {ambient});")
+    sky_lit = pathtrace.lights_surfaces(scene.render)
+    if sky_lit:     # the environment's diffuse light replaces the constant ambient light
+        needs.add("environment_light")
+        ambient = "v3_scale(environment_light(normal), occlusion)" if ao else "environment_light(normal)"
+        lines.append(f"    vec3 color = v3_mul(albedo, {ambient});")
+    else:
+        ambient = f"{literal(AMBIENT)} * occlusion" if ao else literal(AMBIENT)
+        lines.append(f"    vec3 color = v3_scale(albedo, {ambient});")
     if passes:
         lines += ["    passes->diffuse = color;", "    passes->specular = v3((real)0.0f, 0.0f, 0.0f);",
                   "    passes->shadow = 0.0f;",
@@ -447,8 +453,8 @@ def _shade_function(scene_ir: SceneIR, on: dict[str, bool]) -> tuple[str, list[s
         lines.append("    vec3 lifted = v3_add(p, v3_scale(normal, 2.0f * threshold));")
         if scene_ir.bound is not None:
             lines += ["    vec3 bound_centre;", "    real bound_radius = scene_bound(params, &bound_centre);"]
-    if not scene.lights:
-        lines.append("    // no lights in the scene: a headlight, from the eye along the ray")
+    if not scene.lights and not sky_lit:
+        lines.append("    // nothing lights the scene: a headlight, from the eye along the ray")
         lines += _lit_lines("to_eye", "v3(1.0f, 1.0f, 1.0f)", passes, "    ")
     for index, light in enumerate(scene.lights):
         block, light_needs = _light_block(index, light, scene_ir.bound, on["TRANSPARENCY"], passes)

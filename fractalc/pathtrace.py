@@ -119,11 +119,95 @@ def _map_tables(texels: np.ndarray):
     return rows, columns, density
 
 
+def lights_surfaces(render) -> bool:
+    """Whether the direct renderer's surfaces are lit by the environment
+    (an `environment` block or map) instead of the constant ambient light."""
+    return render.environment is not None or render.environment_map is not None
+
+
+# Directions of a quadrature over the sphere: each texel of the map split
+# into QUADRATURE_SPLIT^2 cells of equal solid angle (uniform in z and in
+# longitude within the texel), at their centres.
+QUADRATURE_SPLIT = 4
+
+
+def sphere_quadrature():
+    """Unit directions (N x 3), their cells' solid angles (N) and the map
+    texel each lies in (N: row * MAP_WIDTH + column)."""
+    split = (np.arange(QUADRATURE_SPLIT) + 0.5) / QUADRATURE_SPLIT
+    top = np.cos(np.arange(MAP_HEIGHT) * np.pi / MAP_HEIGHT)
+    bottom = np.cos(np.arange(1, MAP_HEIGHT + 1) * np.pi / MAP_HEIGHT)
+    z = top[:, None] - split[None, :] * (top - bottom)[:, None]                       # row, sub-row
+    longitude = (np.arange(MAP_WIDTH)[:, None] + split[None, :]) * (2 * np.pi / MAP_WIDTH) - np.pi
+    shape = (MAP_HEIGHT, MAP_WIDTH, QUADRATURE_SPLIT, QUADRATURE_SPLIT)   # row, column, sub-row, sub-column
+    z = np.broadcast_to(z[:, None, :, None], shape)
+    longitude = np.broadcast_to(longitude[None, :, None, :], shape)
+    across = np.sqrt(1 - z * z)
+    directions = np.stack([across * np.cos(longitude), across * np.sin(longitude), z], axis=-1).reshape(-1, 3)
+    solid_angle = np.broadcast_to(((top - bottom) * (2 * np.pi / MAP_WIDTH / QUADRATURE_SPLIT ** 2))
+                                  [:, None, None, None], shape).reshape(-1)
+    texel = np.broadcast_to((np.arange(MAP_HEIGHT)[:, None] * MAP_WIDTH + np.arange(MAP_WIDTH)[None, :])
+                            [:, :, None, None], shape).reshape(-1)
+    return directions, solid_angle, texel
+
+
+def sky_radiance(environment, directions) -> np.ndarray:
+    """The sky gradient's radiance (N x 3) along unit `directions` (N x 3)."""
+    z = directions[:, 2:3]
+    horizon = np.asarray(environment.horizon, dtype=float)
+    radiance = (horizon + np.maximum(z, 0) * (np.asarray(environment.zenith) - horizon)
+                + np.maximum(-z, 0) * (np.asarray(environment.ground) - horizon))
+    return radiance * environment.intensity
+
+
+def harmonics_basis(n) -> np.ndarray:
+    """The 9 real spherical harmonics of order <= 2 at unit vectors n
+    (... x 3), without their constant factors: 1, y, z, x, xy, yz,
+    3z^2 - 1, xz, x^2 - y^2 (the order of stdlib_cl/shading/environment.cl)."""
+    x, y, z = n[..., 0], n[..., 1], n[..., 2]
+    return np.stack([np.ones_like(x), y, z, x, x * y, y * z, 3 * z * z - 1, x * z, x * x - y * y], axis=-1)
+
+
+# Each basis function's squared normalisation (Y = factor * basis), and the
+# cosine lobe's convolution weight A_l for its order (Ramamoorthi and
+# Hanrahan 2001: pi, 2 pi / 3, pi / 4).
+_HARMONIC_FACTORS = np.array([1 / 4] + [3 / 4] * 3 + [15 / 4] * 2 + [5 / 16, 15 / 4, 15 / 16]) / np.pi
+_COSINE_LOBE = np.array([np.pi] + [2 * np.pi / 3] * 3 + [np.pi / 4] * 5)
+
+
+def environment_radiance(render) -> tuple[np.ndarray, np.ndarray]:
+    """The environment's radiance (N x 3) at the quadrature's directions,
+    with their solid angles: the map's texel (times the block's
+    intensity), or the sky gradient."""
+    directions, solid_angle, texel = sphere_quadrature()
+    if render.environment_map is not None:
+        scale = render.environment.intensity if render.environment is not None else 1.0
+        radiance = environment_map(render.environment_map).reshape(-1, 3)[texel] * scale
+    else:
+        radiance = sky_radiance(render.environment, directions)
+    return directions, solid_angle, radiance
+
+
+def environment_light(render) -> np.ndarray:
+    """The environment's irradiance over pi, E(n) / pi, as 9 coefficients
+    per colour (9 x 3) of harmonics_basis: the radiance projected on the
+    order-2 spherical harmonics by quadrature, each order convolved with
+    the cosine lobe (Ramamoorthi and Hanrahan 2001). A white diffuse
+    surface facing n shows basis(n) @ coefficients."""
+    directions, solid_angle, radiance = environment_radiance(render)
+    projections = (harmonics_basis(directions) * solid_angle[:, None]).T @ radiance
+    return (_COSINE_LOBE / np.pi * _HARMONIC_FACTORS)[:, None] * projections
+
+
 def environment_constants(render, literal) -> list[str]:
     """The sky's radiance: the environment block's, else the background
     colour everywhere (none with a transparent background); with a map,
     its texels and sampling tables, times the block's intensity."""
     environment = render.environment
+    light = []
+    if lights_surfaces(render):   # the direct renderer's environment light (environment_light)
+        light = [f"__constant float ENVIRONMENT_LIGHT[] = "
+                 f"{{{', '.join(literal(float(v)) for v in np.ravel(environment_light(render)))}}};"]
     if render.environment_map is not None:
         texels = environment_map(render.environment_map)
         rows, columns, density = _map_tables(texels)
@@ -131,7 +215,7 @@ def environment_constants(render, literal) -> list[str]:
 
         def table(name, values):
             return f"__constant float {name}[] = {{{', '.join(literal(float(v)) for v in np.ravel(values))}}};"
-        return ["#define ENVIRONMENT_MAP 1", f"#define MAP_WIDTH {MAP_WIDTH}", f"#define MAP_HEIGHT {MAP_HEIGHT}",
+        return [*light, "#define ENVIRONMENT_MAP 1", f"#define MAP_WIDTH {MAP_WIDTH}", f"#define MAP_HEIGHT {MAP_HEIGHT}",
                 table("ENVIRONMENT_TEXELS", np.minimum(texels * scale, MAX_IRRADIANCE)),
                 table("ENVIRONMENT_ROWS", rows), table("ENVIRONMENT_COLUMNS", columns),
                 table("ENVIRONMENT_DENSITY", density)]
@@ -141,8 +225,8 @@ def environment_constants(render, literal) -> list[str]:
     else:
         sky = {"ZENITH": environment.zenith, "HORIZON": environment.horizon, "GROUND": environment.ground}
         intensity = environment.intensity
-    return [f"#define ENVIRONMENT_{part}_{c} {literal(v * intensity)}"
-            for part, colour in sky.items() for c, v in zip("RGB", colour)]
+    return [*light, *(f"#define ENVIRONMENT_{part}_{c} {literal(v * intensity)}"
+                      for part, colour in sky.items() for c, v in zip("RGB", colour))]
 
 
 def source(scene: CheckedScene, literal, transparency: bool) -> str:

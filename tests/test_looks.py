@@ -119,9 +119,10 @@ def test_a_spot_light_lights_its_cone_and_fades_across_its_falloff(build):
     strength, along = spot_light_at(image.passes["P"].astype(float))
     cone = smoothstep(math.cos(math.radians(35)), math.cos(math.radians(20)), along)
     assert (cone == 1).sum() > 50 and (cone == 0).sum() > 50 and ((cone > 0.1) & (cone < 0.9)).sum() > 20
-    # the direct renderer: ambient 0.25 albedo, plus albedo times the light
+    # the direct renderer: albedo times the light (the black environment is
+    # the ambient light: none)
     for channel, colour in enumerate((1, 0.8, 0.5)):
-        np.testing.assert_allclose(image.rgba[..., channel], 0.6 * (0.25 + colour * strength * cone),
+        np.testing.assert_allclose(image.rgba[..., channel], 0.6 * colour * strength * cone,
                                    rtol=2e-4, atol=1e-6)
 
 
@@ -226,6 +227,73 @@ def test_the_direct_renderer_shows_the_environment_where_rays_miss_and_in_mirror
     near = ~below | (1.5 / np.abs(dirs[..., 2]) < 10)
     assert (below & near).sum() > 100
     np.testing.assert_allclose(image.rgba[..., :3][near], expected[near], atol=2e-4)
+
+
+LIT_BY_SKY = """
+material m {{ color: (0.7, 0.5, 0.3), specular: 0 }}
+scene sphere(1).material(m)
+camera {{ position: (0, -4, 1.5), target: (0, 0, 0), fov: 35 }}
+render {{ width: 32, height: 24, dither: 0, epsilon: 1e-5, {keys} }}
+"""
+ALBEDO = np.array([0.7, 0.5, 0.3])
+
+
+@pytest.mark.parametrize("build", [{}, {"lanes": 1}, {"precision": "double"}])
+def test_a_uniform_environment_lights_a_diffuse_sphere_with_its_radiance(build):
+    # irradiance pi L from every normal: the colour is albedo * L times the
+    # AO (1 on a convex sphere), replacing the ambient 0.25 * albedo
+    keys = "ao: 1, environment: { zenith: (1, 2, 4), horizon: (1, 2, 4), ground: (1, 2, 4), intensity: 0.5 }"
+    image = fractalc.loads(LIT_BY_SKY.format(keys=keys), **build).render()
+    covered = image.rgba[..., 3] == 1
+    assert covered.sum() > 200
+    np.testing.assert_allclose(image.rgba[..., :3][covered], np.broadcast_to(ALBEDO * [0.5, 1, 2],
+                                                                            (covered.sum(), 3)), atol=1e-4)
+
+
+def cosine_integral(normals, directions, solid_angle, radiance):
+    """Irradiance over pi at each normal: the sum over quadrature directions
+    of L(w) max(n.w, 0) dw / pi."""
+    return np.maximum(normals @ directions.T, 0) @ (radiance * solid_angle[:, None]) / math.pi
+
+
+def test_a_sky_gradient_lights_a_diffuse_sphere_as_quadrature_says():
+    from test_pathtrace import sky_irradiance
+    sky = {"zenith": (0.2, 0.4, 1.0), "horizon": (0.9, 0.8, 0.7), "ground": (0.1, 0.3, 0.05)}
+    keys = f"environment: {{ {', '.join(f'{k}: {v}' for k, v in sky.items())} }}"
+    image = fractalc.loads(LIT_BY_SKY.format(keys=keys)).render()
+    covered = image.rgba[..., 3] == 1
+    expected = ALBEDO / math.pi * sky_irradiance(image.normal[covered].astype(float), **sky)
+    # nine spherical harmonics hold the irradiance to within a few percent
+    # (Ramamoorthi and Hanrahan 2001; 2.1 % at worst for this sky, which has
+    # a kink at the horizon), not exactly
+    relative = image.rgba[..., :3][covered] / expected - 1
+    assert covered.sum() > 200 and np.abs(relative).max() < 0.03 and np.abs(relative).mean() < 0.01
+
+
+def test_an_environment_map_lights_a_diffuse_sphere_as_quadrature_over_its_texels_says(tmp_path):
+    from test_pathtrace import write_map
+    # a smooth sky with a broad bright patch, as a 128 x 64 image
+    rows, columns = np.meshgrid(np.arange(64) + 0.5, np.arange(128) + 0.5, indexing="ij")
+    colatitude, longitude = rows / 64 * math.pi, columns / 128 * 2 * math.pi - math.pi
+    toward = np.stack([np.sin(colatitude) * np.cos(longitude), np.sin(colatitude) * np.sin(longitude),
+                       np.cos(colatitude)], axis=-1)
+    patch = np.maximum(toward @ np.array([0.6, -0.48, 0.64]), 0) ** 2
+    pixels = np.array([0.3, 0.4, 0.6]) + 3 * patch[..., None] * np.array([1.0, 0.9, 0.7])
+    write_map(tmp_path / "sky.exr", pixels)
+    image = fractalc.loads(LIT_BY_SKY.format(keys="environment: { intensity: 1.5 }"))\
+        .render(environment_map=str(tmp_path / "sky.exr"))
+    covered = image.rgba[..., 3] == 1
+    # the quadrature: the image's pixels, each over its own solid angle
+    # (the kernel's 64 x 32 texels are their 2 x 2 means)
+    solid_angle = (np.cos(colatitude - math.pi / 128) - np.cos(colatitude + math.pi / 128)) * 2 * math.pi / 128
+    expected = ALBEDO * 1.5 * cosine_integral(image.normal[covered].astype(float), toward.reshape(-1, 3),
+                                              solid_angle.reshape(-1), pixels.reshape(-1, 3))
+    relative = image.rgba[..., :3][covered] / expected - 1
+    assert covered.sum() > 200 and np.abs(relative).max() < 0.03 and np.abs(relative).mean() < 0.01, \
+        (np.abs(relative).max(), np.abs(relative).mean())
+    # the patch lights one side: the brightest pixel faces it
+    brightest = image.normal[covered][np.argmax(image.rgba[..., 0][covered])]
+    assert brightest @ np.array([0.6, -0.48, 0.64]) > 0.8
 
 
 def test_an_mp4_made_from_exr_frames_shows_them_as_their_pngs(tmp_path):

@@ -398,10 +398,11 @@ def test_a_rectangle_light_gives_a_plane_the_irradiance_of_lamberts_polygon_form
     ratio = image.rgba[..., 0][near] / expected[near]
     assert abs(ratio.mean() - 1) < 0.01 and np.abs(ratio - 1).max() < 0.07, (ratio.mean(), ratio.std())
     # the direct renderer: a point at its centre, lighting the side it faces
+    # (no ambient light: the environment, black, is the ambient light)
     direct = fractalc.loads(text.replace("integrator: path, ", "")).render(aovs=["P"])
     offset = np.array([0.5, 0, 1.2]) - direct.passes["P"].astype(float)
     distance = np.linalg.norm(offset, axis=-1)
-    point = 0.6 * (0.25 + 3 * (offset[..., 2] / distance) ** 2 / distance ** 2)
+    point = 0.6 * 3 * (offset[..., 2] / distance) ** 2 / distance ** 2
     np.testing.assert_allclose(direct.rgba[..., 0], point, rtol=1e-4)
 
 
