@@ -85,13 +85,20 @@ class Field:
 Expr = Union[Number, Name, Vector, Unary, Binary, Call, Method, Field]
 
 
+@node
+class String:
+    """A string literal: a file name, only ever a block entry's value."""
+    value: str         # the text between the quotes, as written (no escapes)
+    span: Span         # quotes included
+
+
 # ---- blocks and declarations -----------------------------------------------
 
 @node
 class Entry:
     key: str
     key_span: Span
-    value: Union[Expr, "Block"]
+    value: Union[Expr, "Block", String]
     span: Span
 
 

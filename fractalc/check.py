@@ -11,9 +11,10 @@ import difflib
 from functools import lru_cache
 import itertools
 import math
+import os
 from dataclasses import dataclass, replace
 
-from . import ast, formula_code, ir
+from . import ast, formula_code, ir, pathtrace
 from .errors import Diagnostic, SceneError, Span, diagnostic
 from .program import (DEFAULT_MATERIAL, PROJECTIONS, STEREO_LAYOUTS, Camera, CameraPath, CheckedScene, Coloring,
                       Combination, Environment, Fog, Fractal, Glow, Keyframe, Light, Material, ParamCheck, ParamInfo,
@@ -746,11 +747,35 @@ class _Checker:
                 values = self.entries(entry.value, keys_type, entry.key)
                 found[entry.key] = replace(defaults, **values)
                 continue
+            if isinstance(entry.value, ast.String) != (param.type == "file"):
+                self.error(entry.value.span, f"'{entry.key}' takes a file name in quotes, such as \"sky.exr\""
+                           if param.type == "file" else f"'{entry.key}' takes a value, not a string "
+                                                        f"(strings are file names: environment's 'map')")
+                continue
             try:
-                found[entry.key] = self.entry_value(entry, param, owner)
+                found[entry.key] = self.file(entry.value) if param.type == "file" \
+                    else self.entry_value(entry, param, owner)
             except _Failed:
                 pass
         return found
+
+    def file(self, name: ast.String) -> str:
+        """The absolute path of the image file a string names, relative to
+        the scene file's folder, once it reads (it is read on the host: the
+        path never reaches the kernel's source)."""
+        for index, character in enumerate(name.value):
+            if ord(character) < 32 or ord(character) == 127:
+                column = name.span.column + 1 + index
+                self.fail(Span(name.span.line, column, name.span.line, column + 1),
+                          f"a control character (code {ord(character)}) in a string")
+        if not name.value:
+            self.fail(name.span, "an empty file name")
+        path = os.path.abspath(os.path.join(os.path.dirname(self.program.file), name.value))
+        try:
+            pathtrace.environment_map(path)
+        except ValueError as error:
+            self.fail(name.span, str(error))
+        return path
 
     def entry_value(self, entry: ast.Entry, param: Parameter, owner: str):
         value = self._evaluate(entry.value)
@@ -820,6 +845,9 @@ class _Checker:
 
     def render(self, decl: ast.RenderDecl | None) -> RenderSettings:
         found = self.entries(decl.block if decl else None, RENDER_KEYS, "render")
+        environment = found.get("environment")
+        if environment is not None and environment.map is not None:   # the one place a map is kept
+            found.update(environment=replace(environment, map=None), environment_map=environment.map)
         return RenderSettings(**found)
 
     def path(self, decl: ast.PathDecl | None) -> CameraPath | None:
@@ -943,7 +971,8 @@ BLOCK_KEYS = {
     "block:fog": (_keys(_P("color", "vec3", None, ">=0"), _P("density", "num", None, ">=0")), Fog()),
     "block:slice": (_keys(_P("normal", "vec3", None, "nonzero"), _P("offset", "num")), Slice()),
     "block:environment": (_keys(_P("zenith", "vec3", None, ">=0"), _P("horizon", "vec3", None, ">=0"),
-                                _P("ground", "vec3", None, ">=0"), _P("intensity", "num", None, ">=0")),
+                                _P("ground", "vec3", None, ">=0"), _P("intensity", "num", None, ">=0"),
+                                _P("map", "file")),
                           Environment()),
 }
 RENDER_KEYS = _keys(
@@ -1000,6 +1029,11 @@ def check_value(param: Parameter, key: str, value):
     """Validate a render setting given from Python or the command line
     (type and range, as in a file); raise ValueError saying what is wrong."""
     checker = _Checker(ast.Program((), "<arguments>", ""))
+    if param.type == "file":
+        if value is not None:
+            raise ValueError(f"'{key}' is a scene file's key: from Python give environment_map=FILE "
+                             f"(on the command line, --environment-map FILE)")
+        return None
     if param.type in BLOCK_KEYS:
         keys, defaults = BLOCK_KEYS[param.type]
         if value is False:

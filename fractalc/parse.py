@@ -39,6 +39,7 @@ _TOKEN_WORDS = {
     "COMMA": "','", "COLON": "':'", "EQUAL": "'='", "DOT": "'.'",
     "PLUS": "'+'", "MINUS": "'-'", "STAR": "'*'", "SLASH": "'/'",
     "BAR": "'|'", "AMP": "'&'", "COMPARE": "a comparison", "_NL": "a new line", "$END": "the end of the file",
+    "STRING": "a string",
 }
 
 
@@ -159,7 +160,10 @@ class _ToAst(Transformer_NonRecursive):
 
     # blocks and declarations
     def entry(self, meta, c):
-        return ast.Entry(str(c[0]), _span(c[0]), c[1], _span(meta))
+        value = c[1]
+        if isinstance(value, Token):     # a STRING
+            value = ast.String(value[1:-1], _span(value))
+        return ast.Entry(str(c[0]), _span(c[0]), value, _span(meta))
 
     def block(self, meta, c):
         entries = tuple(x for x in c if isinstance(x, ast.Entry))
@@ -256,6 +260,8 @@ def _expected_words(expected) -> str:
 def _syntax_message(error: UnexpectedInput, before: str = "") -> str:
     """What went wrong; `before` is the text of the error's line before it."""
     if isinstance(error, UnexpectedCharacters):
+        if error.char == '"':
+            return "unterminated string: a string ends with '\"' on the line it starts"
         return f"unexpected character '{error.char}'"
     if isinstance(error, UnexpectedEOF):
         return "unexpected end of the file (an unclosed bracket?)"
@@ -266,6 +272,8 @@ def _syntax_message(error: UnexpectedInput, before: str = "") -> str:
         return f"missing ',' or new line before '{token}' (block entries are separated by commas or new lines)"
     if token.type == "$END":
         return f"unexpected end of the file, expected {_expected_words(expected)}"
+    if token.type == "STRING":
+        return f"unexpected string {token}: a string is a file name, only ever a block entry's value"
     if token.type == "COMPARE":
         return f"unexpected '{token}': comparisons do not chain (join them with '&': 'a < b & b < c')"
     if token.type == "LBRACE" and re.search(r"(^|\W)else\s*$", before):
@@ -281,9 +289,9 @@ class _Stop(Exception):
 
 # Lark's tokens (see grammar/frac.lark): skipped space and comments, then a
 # name, a number, a punctuation mark or a new line; group 4 is the end of the
-# text and group 5 any other character (an error).
+# text, group 5 a string and group 6 any other character (an error).
 _FAST_TOKEN = re.compile(r"(?:[ \t\r\f]+|#[^\n]*)*(?:([A-Za-z_][A-Za-z0-9_]*)|((?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)"
-                         r"|(<=|>=|==|!=|[-+*/|&(){}\[\],:=.<>\n])|(\Z)|(.))", re.S)
+                         r"|(<=|>=|==|!=|[-+*/|&(){}\[\],:=.<>\n])|(\Z)|(\"[^\"\n]*\")|(.))", re.S)
 _DECL_WORDS = frozenset({"param", "let", "material", "scene", "camera", "light", "render", "path", "formula"})
 _COMPARISONS = frozenset({"<", "<=", ">", ">=", "==", "!="})
 _PRECEDENCE = {"|": 1, "&": 2, **{c: 2.5 for c in _COMPARISONS}, "+": 3, "-": 3, "*": 4, "/": 4}
@@ -296,8 +304,8 @@ _FIRST_TOKENS = 1 << 12
 
 
 def _tokens(source: str, most: int | None) -> tuple[list, list, list, list]:
-    """Kinds ("name", "number", the punctuation itself, "\n", "" at the end,
-    "?" for a character no token starts with, "..." where `most` tokens
+    """Kinds ("name", "number", "string", the punctuation itself, "\n", "" at
+    the end, "?" for a character no token starts with, "..." where `most` tokens
     were read), texts, lines and columns of the tokens of `source`. New
     lines are kept only directly inside `{ }` and once, as `_BlockNewlines`
     does."""
@@ -322,13 +330,15 @@ def _tokens(source: str, most: int | None) -> tuple[list, list, list, list]:
             kind, text = "name", intern(text)     # one string for all the `sphere`s
         elif group == 2:
             kind = "number"
+        elif group == 5:
+            kind = "string"     # its text with the quotes
         else:
             kind, text = ("" if group == 4 else "?"), ""
         add_kind(kind)
         add_text(text)
         add_line(line)
         add_column(match.start(group) - line_start + 1)
-        if group > 3:
+        if group in (4, 6):
             break
     else:
         add_kind("...")
@@ -514,6 +524,10 @@ class _FastParser:
     def entry(self) -> ast.Entry:
         key, key_span = self.name()
         self.expect(":")
+        if self.kinds[self.i] == "string":
+            value = ast.String(self.texts[self.i][1:-1], self.span(self.i))
+            self.i += 1
+            return ast.Entry(key, key_span, value, key_span.to(value.span))
         if self.kinds[self.i] == "{":
             value = self.block()
             return ast.Entry(key, key_span, value, key_span.to(value.span))

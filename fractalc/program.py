@@ -220,6 +220,7 @@ class Environment:
     horizon: Vector3 = (0.9, 0.9, 0.95)
     ground: Vector3 = (0.3, 0.27, 0.25)
     intensity: float = 1.0
+    map: str | None = None    # the file's `map`: the checker moves it to RenderSettings.environment_map
 
 
 @dataclass(frozen=True)

@@ -339,3 +339,83 @@ def test_colour_by_iteration_count_and_by_position():
             aovs=["albedo", "P"])
         t = np.clip(0.5 * of_point(image.passes["P"][fractal].astype(float)), 0, 1)
         np.testing.assert_allclose(image.passes["albedo"][fractal][:, 0], t, atol=2e-3)
+
+
+def scene_with_map(tmp_path, entry: str):
+    """scenes/scene.frac under tmp_path, its render block's environment
+    holding `entry`; a map of radiance (0.2, 0.4, 0.8) in scenes/maps."""
+    from test_pathtrace import write_map
+    (tmp_path / "scenes" / "maps").mkdir(parents=True)
+    write_map(tmp_path / "scenes" / "maps" / "sky.exr", np.ones((8, 16, 3)) * [0.2, 0.4, 0.8])
+    path = tmp_path / "scenes" / "scene.frac"
+    path.write_text("scene sphere(1)\ncamera { position: (0, -4, 0), target: (0, 0, 0) }\n"
+                    f"render {{ width: 16, height: 12, environment: {{ {entry} }} }}\n")
+    return path
+
+
+def test_a_scene_file_names_its_environment_map_relative_to_its_folder(tmp_path, monkeypatch):
+    from test_pathtrace import write_map
+    path = scene_with_map(tmp_path, 'map: "maps/sky.exr", intensity: 2')
+    monkeypatch.chdir(tmp_path)           # not the scene's folder
+    scene = fractalc.load(path)
+    image = scene.render()
+    missed = image.rgba[..., 3] == 0
+    assert missed.sum() > 50
+    np.testing.assert_allclose(image.rgba[..., :3][missed], np.broadcast_to([0.4, 0.8, 1.6], (missed.sum(), 3)),
+                               rtol=1e-6)
+    # the sphere (albedo 0.8) lit by the map: the environment light
+    hit = image.rgba[..., 3] == 1
+    np.testing.assert_allclose(image.rgba[..., :3][hit], np.broadcast_to([0.32, 0.64, 1.28], (hit.sum(), 3)),
+                               atol=1e-4)
+    # the map is read on the host: its name is nowhere in the kernel
+    source = scene.kernel_source()
+    assert "sky.exr" not in source and str(tmp_path / "scenes" / "maps") not in source
+    assert "ENVIRONMENT_TEXELS" in source
+    # the API's (and the command line's) map replaces the file's
+    write_map(tmp_path / "other.exr", np.ones((8, 16, 3)) * [1.0, 0.5, 0.25])
+    other = scene.render(environment_map=tmp_path / "other.exr")
+    np.testing.assert_allclose(other.rgba[..., :3][missed], np.broadcast_to([2, 1, 0.5], (missed.sum(), 3)),
+                               rtol=1e-6)
+    with pytest.raises(ValueError, match="from Python give environment_map=FILE"):
+        scene.render(environment={"map": "maps/sky.exr"})
+
+
+@pytest.mark.parametrize("entry, offset, message", [     # offset: of the error in the entry
+    ('map: "missing.exr"', 5, "cannot read the environment map"),
+    ('map: "scene.frac"', 5, "cannot read the environment map"),              # not an image
+    ('map: "maps/s\x01ky.exr"', 12, "a control character (code 1) in a string"),
+    ('map: "maps/sky.exr', 5, "unterminated string: a string ends with '\"' on the line it starts"),
+    ('map: 3', 5, "'map' takes a file name in quotes"),
+    ('map: ""', 5, "an empty file name"),
+    ('zenith: "maps/sky.exr"', 8, "'zenith' takes a value, not a string"),
+])
+def test_bad_map_names_are_errors_at_their_place(tmp_path, capsys, entry, offset, message):
+    from fractalc.cli import main
+    path = scene_with_map(tmp_path, entry)
+    column = path.read_text().splitlines()[2].index(entry) + 1 + offset
+    with pytest.raises(fractalc.SceneError) as caught:
+        fractalc.load(path)
+    assert (caught.value.line, caught.value.column) == (3, column) and message in str(caught.value)
+    # the command line: the same error, with its line and caret, exit code 2
+    assert main(["render", str(path), "-o", str(tmp_path / "out.png"), "-q"]) == 2
+    error = capsys.readouterr().err
+    assert f"{path}:3:{column}: error: " in error and "^" in error and "Traceback" not in error
+    assert not (tmp_path / "out.png").exists()
+
+
+@pytest.mark.parametrize("text", [
+    'render { environment: { map: "sky.exr", intensity: 2 } }\nscene sphere()',
+    'render {\n  environment: {\n    map: "a b/#c.hdr"\n  }\n}\nscene sphere()',
+    'camera { fov: "" }',
+])
+def test_both_parsers_read_strings_alike(text):
+    from fractalc import parse as parse_module
+    from test_large_input import as_data, lark_decls
+    assert as_data(parse_module._FastParser(text).program()) == as_data(lark_decls(text))
+
+
+def test_a_string_is_only_a_block_entrys_value():
+    with pytest.raises(fractalc.SceneError) as caught:
+        fractalc.loads('scene sphere("sky.exr")')
+    assert (caught.value.line, caught.value.column) == (1, 14)
+    assert "a string is a file name, only ever a block entry's value" in str(caught.value)
