@@ -43,6 +43,17 @@ vec3 around_normal(vec3 n, vec3 v) {
     return v3_add(v3_add(v3_scale(t1, v.x), v3_scale(t2, v.y)), v3_scale(n, v.z));
 }
 
+// The Fresnel reflectance of a smooth dielectric (unpolarised light, the
+// exact equations) for light meeting it from outside at cosine c to the
+// normal, the inside's index of refraction `ior` (the outside's 1).
+real fresnel_dielectric(real c, real ior) {
+    c = clamp(c, 0.0f, 1.0f);
+    real cos_t = sqrt(max(1.0f - (1.0f - c * c) / (ior * ior), 0.0f));   // Snell: sin_t = sin_i / ior
+    real s = (c - ior * cos_t) / (c + ior * cos_t);
+    real p = (cos_t - ior * c) / (cos_t + ior * c);
+    return 0.5f * (s * s + p * p);
+}
+
 // Smith's masking of GGX for one direction at cosine c to the normal.
 real smith_ggx(real c, real alpha) {
     real a2 = alpha * alpha;
@@ -253,9 +264,16 @@ vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel
         weight = v3_select(v3(specular_weight, specular_weight, specular_weight), weight, diffuse);
         vec3 start = lifted;
 #if PATH_TRANSPARENCY
-        // glass: through the solid (the direct renderer's through_solid),
-        // white, on from its far side
-        mask through = active & !diffuse & !glossy & (choice < diffuse_weight + glossy_weight + glass_weight);
+        // glass: reflected with the probability of its Fresnel reflectance
+        // (the mirror direction above, weight 1), else through the solid (the
+        // direct renderer's through_solid), white, on from its far side; the
+        // glass band of `choice`, rescaled, is the draw between the two. A ray
+        // that meets the surface from behind (a grazing ray stopped short of
+        // it) goes through.
+        real glass_start = diffuse_weight + glossy_weight;
+        mask glass = active & !diffuse & !glossy & (choice < glass_start + glass_weight);
+        real reflectance = SELECT((real)0.0f, fresnel_dielectric(nv, s.ior), nv > 0.0f);
+        mask through = glass & ((choice - glass_start) >= reflectance * glass_weight);
         if (ANY(through)) {
             vec3 out_start;
             vec3 out_dir = through_solid(p, dir, n, s.ior, threshold, through, &out_start, params);

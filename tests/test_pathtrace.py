@@ -296,10 +296,48 @@ def test_the_direct_renderer_lights_with_a_sphere_as_a_point_with_soft_shadows()
 
 
 def test_a_clear_glass_ball_vanishes_in_a_uniform_environment():
+    # the furnace test of a dielectric: a path is reflected (Fresnel) or
+    # goes through, and either way it escapes to the environment's 1
     glass = furnace(1.0).checked.source.replace("specular: 0", "specular: 0, transparency: 1, ior: 1.5")
     image = fractalc.loads(glass).render(samples=8)
     assert (image.rgba[..., 3] == 1).sum() > 150
-    assert np.abs(image.rgba[..., :3] - 1).max() < 1e-4     # every path through it comes out
+    assert np.abs(image.rgba[..., :3] - 1).max() < 1e-4     # every path comes out, reflected or through
+
+
+def fresnel(cosine, ior):
+    """The exact Fresnel reflectance of unpolarised light from outside."""
+    cos_t = np.sqrt(1 - (1 - cosine ** 2) / ior ** 2)
+    s = (cosine - ior * cos_t) / (cosine + ior * cos_t)
+    p = (cos_t - ior * cosine) / (cos_t + ior * cosine)
+    return (s * s + p * p) / 2
+
+
+def test_glass_reflects_the_fresnel_fraction_of_the_light(tmp_path):
+    # a wide glass slab under a map bright above the horizon and black
+    # below: a path reflected at the top face sees 1, one that goes through
+    # leaves the bottom face downward and sees 0, so a pixel's mean is the
+    # reflectance at its angle
+    sky = np.zeros((32, 64, 3))
+    sky[:16] = 1.0
+    write_map(tmp_path / "half.exr", sky)
+    text = """
+    material glass { color: (1, 1, 1), specular: 0, transparency: 1, ior: 1.5 }
+    scene box((40, 40, 1)).translate((0, 0, -0.5)).material(glass)
+    camera { position: (0, -1.5, 1), target: (0, 1, -1), fov: 70 }
+    render { width: 32, height: 24, integrator: path, bounces: 3, epsilon: 1e-5 }
+    """
+    image = fractalc.loads(text).render(samples=64, aovs=["P"], environment_map=str(tmp_path / "half.exr"))
+    to_hit = image.passes["P"].astype(float) - [0, -1.5, 1]
+    cosine = -to_hit[..., 2] / np.linalg.norm(to_hit, axis=-1)
+    expected = fresnel(cosine, 1.5)
+    value = image.rgba[..., 0]
+    assert np.all(image.rgba[..., 3] == 1) and cosine.min() < 0.3 and cosine.max() > 0.8
+    # each pixel is the mean of 64 draws of 1 (probability F) or 0: the
+    # residuals' sum within 3 of its standard error
+    residual = (value - expected).sum() / np.sqrt((expected * (1 - expected) / 64).sum())
+    assert abs(residual) < 3, residual
+    # 4 % head on, rising toward grazing angles
+    assert value[cosine > 0.8].mean() < 0.07 and value[cosine < 0.4].mean() > 0.15
 
 
 @pytest.mark.parametrize("ior", [1.0, 1.5])
