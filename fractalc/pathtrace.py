@@ -64,6 +64,11 @@ MAP_WIDTH, MAP_HEIGHT = 64, 32
 # The path tracer draws the map's directions in proportion to its
 # brightness (importance sampling); False: by solid angle alone.
 IMPORTANCE = True
+# Light that next-event estimation and the surfaces' lobes both find (area
+# lights, an environment map) is weighted between them by the power
+# heuristic (multiple importance sampling); False: next-event estimation's
+# alone (the path tracer before it, for comparison).
+MIS = True
 
 
 @lru_cache(maxsize=8)
@@ -238,6 +243,8 @@ def source(scene: CheckedScene, literal, transparency: bool) -> str:
     constants = [f"#define BOUNCES {render.bounces}", f"#define LIGHT_STRIDE {LIGHT_STRIDE}",
                  f"#define CAMERA_SEES_ENVIRONMENT {int(render.background != 'transparent')}",
                  f"#define PATH_TRANSPARENCY {int(transparency)}",
+                 f"#define AREA_LIGHTS {int(any(light.kind in ('sphere', 'rectangle') for light in scene.lights))}",
+                 f"#define MIS {int(MIS)}",
                  f"#define LIGHT_COUNT {len(rows)}",
                  "__constant scalar LIGHTS[] = {",      # never empty (C has no empty arrays)
                  *(f"    {', '.join(literal(v) for v in row)}," for row in rows or [[0.0] * LIGHT_STRIDE]),

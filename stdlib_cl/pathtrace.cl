@@ -16,11 +16,18 @@
 //                           spot's axis and its cone's outer and inner
 //                           cosines, or a sphere's radius (at 11), and a
 //                           rectangle's edges (13 to 18)
+//   AREA_LIGHTS             1 where a light is a sphere or a rectangle
+//   MIS                     1: light that both next-event estimation and the
+//                           surface's lobes can find is weighted between them
+//                           (the power heuristic); 0: next-event estimation's
+//                           alone (fractalc/pathtrace.py, for comparison)
 // Paths scatter off surfaces in a loop (no recursion): at each hit, light
 // from every light by next-event estimation (shadow rays), then one new
-// direction sampled from the surface's lobes; the environment is reached by
-// those directions only (the lights are points and directions, which no
-// sampled direction finds, so nothing is counted twice).
+// direction sampled from the surface's lobes, which may meet a sphere or
+// rectangle light or escape to the environment. Light that both ways find
+// (area lights, an environment map) is counted by each with its multiple
+// importance sampling weight; point, spot and directional lights only by
+// the first, the sky gradient only by the second.
 
 #define INV_PI 0.3183098861837907f
 #define ROULETTE_AFTER 2        // bounces before Russian roulette may end a path
@@ -60,15 +67,62 @@ real smith_ggx(real c, real alpha) {
     return 2.0f * c / (c + sqrt(a2 + (1.0f - a2) * c * c));
 }
 
+// GGX's distribution of microfacet normals at cosine nh to the normal.
+real ggx_distribution(real nh, real alpha) {
+    real a2 = alpha * alpha;
+    real denominator = nh * nh * (a2 - 1.0f) + 1.0f;
+    return a2 * INV_PI / (denominator * denominator);
+}
+
 // The GGX (Trowbridge-Reitz) microfacet reflection, white (no Fresnel: the
 // direct renderer's highlight is white too), for n.l, n.v > 0.
 real ggx_brdf(vec3 n, vec3 to_light, vec3 to_eye, real alpha) {
     vec3 h = v3_normalize(v3_add(to_light, to_eye));
     real nh = max(v3_dot(n, h), 0.0f), nl = v3_dot(n, to_light), nv = v3_dot(n, to_eye);
-    real a2 = alpha * alpha;
-    real denominator = nh * nh * (a2 - 1.0f) + 1.0f;
-    real distribution = a2 * INV_PI / (denominator * denominator);
-    return distribution * smith_ggx(nl, alpha) * smith_ggx(nv, alpha) / (4.0f * nl * nv);
+    return ggx_distribution(nh, alpha) * smith_ggx(nl, alpha) * smith_ggx(nv, alpha) / (4.0f * nl * nv);
+}
+
+// The density per steradian with which the surface's diffuse and glossy
+// lobes draw the direction l (each lobe's density times its weight, as the
+// lobe is chosen; the glossy lobe's half vector from D(h) n.h, so l's
+// density is D(h) n.h / (4 v.h)). Mirror and glass draw single directions,
+// which next-event estimation never draws.
+real bsdf_density(vec3 n, vec3 to_eye, vec3 l, real diffuse_weight, real glossy_weight, real alpha) {
+    vec3 h = v3_normalize(v3_add(l, to_eye));
+    real nl = v3_dot(n, l), nh = max(v3_dot(n, h), 0.0f), vh = max(v3_dot(to_eye, h), (real)1e-6f);
+    real glossy = SELECT((real)0.0f, ggx_distribution(nh, alpha) * nh / (4.0f * vh), v3_dot(n, to_eye) > 0.0f);
+    return SELECT((real)0.0f, diffuse_weight * nl * INV_PI + glossy_weight * glossy, nl > 0.0f);
+}
+
+// The power heuristic (Veach 1997): the weight of a sample drawn with
+// density `chosen` where another technique draws it with density `other`
+// (1 / (1 + (other / chosen)^2): no overflow, 0 where chosen is 0).
+real power_heuristic(real chosen, real other) {
+    real ratio = fmin(other, (real)1e18f) / clamp(chosen, (real)1e-30f, (real)1e18f);
+    return 1.0f / (1.0f + ratio * ratio);
+}
+
+// The weight of next-event estimation's sample of a light that the lobes
+// can also find, drawn with `density` where the lobes' is `lobes`.
+real light_sample_weight(real density, real lobes) {
+#if MIS
+    return power_heuristic(density, lobes);
+#else
+    return 1.0f;
+#endif
+}
+
+// The weight of a light that a direction drawn by the lobes (with
+// `density`) met, where next-event estimation draws it with
+// `light_density`; 1 where the direction was not drawn by those lobes but
+// is a camera ray's or a mirror's or glass's (`delta`: next-event
+// estimation cannot find such light).
+real lobe_sample_weight(real density, real light_density, mask delta) {
+#if MIS
+    return SELECT(power_heuristic(density, light_density), (real)1.0f, delta);
+#else
+    return SELECT((real)0.0f, (real)1.0f, delta);
+#endif
 }
 
 #if ENVIRONMENT_MAP
@@ -114,6 +168,68 @@ real sample_environment(lane_uint key, uint first, vec3 *dir, vec3 *radiance) {
 }
 #endif
 
+// A rectangle light's area: the lengths of its two (perpendicular) edges.
+scalar rectangle_area(__constant scalar *light) {
+    return sqrt((light[13] * light[13] + light[14] * light[14] + light[15] * light[15])
+                * (light[16] * light[16] + light[17] * light[17] + light[18] * light[18]));
+}
+
+#if AREA_LIGHTS
+// The radiance of the nearest sphere or rectangle light (the lit side of a
+// rectangle; from behind it is not there) that the ray from `origin` along
+// `dir` meets before `reach`, weighted for the way the ray was drawn
+// (lobe_sample_weight, with the lobes' `density` or `delta`; a light that
+// casts no shadows is next-event estimation's alone); *seen: the lanes that
+// meet one. The light numbered `skip` is not looked for (-1: none).
+vec3 area_light_seen(vec3 origin, vec3 dir, real reach, real density, mask delta, int skip, mask *seen) {
+    vec3 emitted = v3((real)0.0f, 0.0f, 0.0f);
+    real nearest = reach;
+    *seen = (mask)0;
+    for (int i = 0; i < LIGHT_COUNT; i++) {
+        __constant scalar *light = LIGHTS + i * LIGHT_STRIDE;
+        if ((light[0] != 4.0f && light[0] != 5.0f) || i == skip)
+            continue;
+        vec3 offset = v3_sub(v3(light[1], light[2], light[3]), origin);
+        real t, light_density;
+        mask met;
+        scalar area;
+        if (light[0] == 4.0f) {
+            // the ball's near side, seen from outside it; next-event
+            // estimation draws directions uniformly in the cone it fills
+            scalar radius = light[11];
+            real along = v3_dot(offset, dir), distance2 = v3_dot(offset, offset);
+            real discriminant = along * along - distance2 + radius * radius;
+            t = along - sqrt(max(discriminant, 0.0f));
+            met = (discriminant >= 0.0f) & (distance2 > radius * radius) & (t > 0.0f);
+            real sin2 = fmin(radius * radius / distance2, 1.0f);
+            light_density = 1.0f / (6.283185307179586f * max(sin2 / (1.0f + sqrt(1.0f - sin2)), (real)1e-30f));
+            area = PI_F * radius * radius;      // the radiance is irradiance / (pi r^2)
+        } else {
+            // the panel's plane, within its edges; next-event estimation
+            // draws points uniformly on it (density d^2 / (area cos))
+            vec3 axis = v3(light[8], light[9], light[10]);
+            vec3 width = v3(light[13], light[14], light[15]), height = v3(light[16], light[17], light[18]);
+            real facing = -v3_dot(dir, axis);
+            t = v3_dot(offset, axis) / SELECT(-facing, (real)-1.0f, facing == 0.0f);
+            vec3 on_plane = v3_sub(v3_scale(dir, t), offset);
+            real s = v3_dot(on_plane, width) / v3_dot(width, width);
+            real u = v3_dot(on_plane, height) / v3_dot(height, height);
+            met = (facing > 0.0f) & (t > 0.0f) & (fabs(s) <= 0.5f) & (fabs(u) <= 0.5f);
+            area = rectangle_area(light);
+            light_density = t * t / max(area * facing, (real)1e-30f);
+        }
+        met = met & (t < nearest);
+        real weight = light[7] != 0.0f ? lobe_sample_weight(density, light_density, delta)
+                                       : SELECT((real)0.0f, (real)1.0f, delta);
+        vec3 radiance = v3_scale(v3(light[4], light[5], light[6]), weight / area);
+        emitted = v3_select(emitted, radiance, met);
+        nearest = SELECT(nearest, t, met);
+        *seen = *seen | met;
+    }
+    return emitted;
+}
+#endif
+
 // Light arriving at p from every light, reflected toward the eye:
 // next-event estimation with a shadow ray per light that casts shadows
 // (a sphere light's toward a point of it drawn with random dimensions
@@ -127,6 +243,7 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
         vec3 vector = v3(light[1], light[2], light[3]);
         vec3 to_light = vector;
         real reach = (real)MAX_DISTANCE, falloff = 1.0f;
+        real light_density = 0.0f;     // an area light's density of its sampled direction
         if (light[0] != 0.0f) {
             bool headlight = light[0] == 2.0f;
             vec3 offset = v3_sub(headlight ? eye : vector, p);
@@ -144,10 +261,12 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
                 scalar radius = light[11];
                 real sin2 = fmin(radius * radius / (reach * reach), 1.0f);
                 real cos_max = sqrt(1.0f - sin2);
-                real cos_t = 1.0f - sample_random(key, first + 2u * (uint)i) * (1.0f - cos_max);
+                real one_minus_cos = sin2 / (1.0f + cos_max);     // 1 - cos_max, exact for a small sphere
+                real cos_t = 1.0f - sample_random(key, first + 2u * (uint)i) * one_minus_cos;
                 real sin_t = sqrt(max(1.0f - cos_t * cos_t, 0.0f));
                 real angle = 6.283185307179586f * sample_random(key, first + 2u * (uint)i + 1u);
-                falloff = SELECT(2.0f * (1.0f - cos_max) / (radius * radius), (real)0.0f, reach <= radius);
+                falloff = SELECT(2.0f * one_minus_cos / (radius * radius), (real)0.0f, reach <= radius);
+                light_density = 1.0f / (6.283185307179586f * max(one_minus_cos, (real)1e-30f));
                 reach = reach * cos_t - sqrt(max(radius * radius - reach * reach * sin_t * sin_t, 0.0f));
                 to_light = around_normal(to_light, v3(sin_t * cos(angle), sin_t * sin(angle), cos_t));
             }
@@ -164,6 +283,7 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
                 to_light = v3_scale(offset, 1.0f / max(reach, (real)1e-30f));
                 real facing = -v3_dot(to_light, v3(light[8], light[9], light[10]));
                 falloff = fmin(max(facing, 0.0f) / (reach * reach), 1e8f);
+                light_density = reach * reach / max(rectangle_area(light) * facing, (real)1e-30f);
             }
         }
         real cosine = v3_dot(n, to_light);
@@ -173,6 +293,13 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
         if (light[7] != 0.0f) {
             march_result blocker = march(lifted, to_light, lit, pixel_angle, 0.0f, params);
             lit = lit & !(blocker.hit & (blocker.t < reach));
+#if AREA_LIGHTS
+            // area lights are opaque: one before this light hides it, as
+            // from the lobes' directions
+            mask hidden;
+            area_light_seen(p, to_light, reach, 0.0f, ~(mask)0, i, &hidden);
+            lit = lit & !hidden;
+#endif
         }
         // (only where both the light and the eye face the surface: elsewhere
         // Smith's masking divides by zero, and 0 times that is not 0)
@@ -181,6 +308,9 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
         vec3 reflected = v3_add(v3_scale(albedo, diffuse_weight * INV_PI), v3((real)(glossy_weight * glossy),
                                 glossy_weight * glossy, glossy_weight * glossy));
         real strength = SELECT((real)0.0f, cosine * falloff, lit);
+        if ((light[0] == 4.0f || light[0] == 5.0f) && light[7] != 0.0f)   // the lobes find it too
+            strength = strength * light_sample_weight(light_density, bsdf_density(n, to_eye, to_light,
+                                                                                   diffuse_weight, glossy_weight, alpha));
         total = v3_add(total, v3_mul(reflected, v3_scale(v3(light[4], light[5], light[6]), strength)));
     }
 #if ENVIRONMENT_MAP
@@ -193,10 +323,17 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
     if (ANY(lit)) {
         march_result blocker = march(lifted, to_sky, lit, pixel_angle, 0.0f, params);
         lit = lit & !blocker.hit;
+#if AREA_LIGHTS
+        mask hidden;      // behind an area light
+        area_light_seen(p, to_sky, (real)1e30f, 0.0f, ~(mask)0, -1, &hidden);
+        lit = lit & !hidden;
+#endif
         real glossy = SELECT((real)0.0f, ggx_brdf(n, to_sky, to_eye, alpha), lit & (v3_dot(n, to_eye) > 0.0f));
         vec3 reflected = v3_add(v3_scale(albedo, diffuse_weight * INV_PI), v3((real)(glossy_weight * glossy),
                                 glossy_weight * glossy, glossy_weight * glossy));
-        real strength = SELECT((real)0.0f, cosine / max(density, (real)1e-30f), lit);
+        real strength = SELECT((real)0.0f, cosine / max(density, (real)1e-30f), lit)
+                        * light_sample_weight(density, bsdf_density(n, to_eye, to_sky, diffuse_weight, glossy_weight,
+                                                                    alpha));
         total = v3_add(total, v3_mul(reflected, v3_scale(sky, strength)));
     }
 #endif
@@ -211,6 +348,16 @@ vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel
     vec3 radiance = v3_scale(environment(dir), SELECT((real)CAMERA_SEES_ENVIRONMENT, (real)0.0f, m.hit));
     vec3 throughput = v3((real)1.0f, 1.0f, 1.0f);
     mask active = m.hit;
+#if AREA_LIGHTS
+    // a light in front of what the camera ray hit, or where it missed
+    mask seen;
+    vec3 emitted = area_light_seen(origin, dir, SELECT((real)1e30f, m.t, m.hit), 0.0f, ~(mask)0, -1, &seen);
+#if !CAMERA_SEES_ENVIRONMENT
+    seen = seen & m.hit;     // a miss is empty, lights included
+#endif
+    radiance = v3_select(radiance, emitted, seen);
+    active = active & !seen;
+#endif
     real travelled = 0.0f;
     for (int bounce = 0; bounce < BOUNCES && ANY(active); bounce++) {
         travelled = travelled + m.t;
@@ -283,6 +430,9 @@ vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel
         }
 #endif
         throughput = v3_mul(throughput, weight);
+        // how the direction was drawn, for the weights of the light it meets
+        mask delta = !diffuse & !glossy;
+        real density = bsdf_density(n, to_eye, scattered, diffuse_weight, glossy_weight, alpha);
         // Russian roulette: a dim path goes on with the probability of its
         // brightness, and if it does, counts for the ones that stopped
         if (bounce >= ROULETTE_AFTER) {
@@ -292,14 +442,29 @@ vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel
         }
         active = active & (max(throughput.x, max(throughput.y, throughput.z)) > 0.0f);
         m = march(start, scattered, active, pixel_angle, 0.0f, params);
+#if AREA_LIGHTS
+        // a light that the new direction meets before the next surface: its
+        // weighted radiance, and the path ends there. Seen from the hit
+        // itself, not from the lifted start of the march: next-event
+        // estimation's directions, and their densities, are the hit's
+        // (the lift is a few pixel footprints, far from small near a
+        // light); a glass path's from where it left the solid.
+        mask seen;
+        vec3 emitted = area_light_seen(v3_select(p, start, delta), scattered, SELECT((real)1e30f, m.t, m.hit),
+                                       density, delta, -1, &seen);
+        seen = seen & active;
+        radiance = v3_add(radiance, v3_mul(throughput, v3_select(v3((real)0.0f, 0.0f, 0.0f), emitted, seen)));
+        active = active & !seen;
+#endif
         mask escaped = active & !m.hit;
 #if ENVIRONMENT_MAP
-        // a map's light reaches diffuse and glossy surfaces by next-event
-        // estimation alone: only mirror and glass paths count what they escape to
-        escaped = escaped & !diffuse & !glossy;
+        // a map's light is next-event estimation's too: weighted between them
+        real sky_weight = lobe_sample_weight(density, table_at(ENVIRONMENT_DENSITY, map_texel(scattered)), delta);
+#else
+        real sky_weight = 1.0f;
 #endif
         radiance = v3_add(radiance, v3_mul(throughput, v3_scale(environment(scattered),
-                                                                SELECT((real)0.0f, (real)1.0f, escaped))));
+                                                                SELECT((real)0.0f, sky_weight, escaped))));
         active = active & m.hit;
         normal = hit_normal(start, scattered, m, pixel_angle, params);
         origin = start;

@@ -238,7 +238,7 @@ render {{ width: 32, height: 24, dither: 0, epsilon: 1e-5, {keys} }}
 ALBEDO = np.array([0.7, 0.5, 0.3])
 
 
-@pytest.mark.parametrize("build", [{}, {"lanes": 1}, {"precision": "double"}])
+@pytest.mark.parametrize("build", [{}, {"lanes": 1, "precision": "double"}])   # (a GPU's lanes)
 def test_a_uniform_environment_lights_a_diffuse_sphere_with_its_radiance(build):
     # irradiance pi L from every normal: the colour is albedo * L times the
     # AO (1 on a convex sphere), replacing the ambient 0.25 * albedo

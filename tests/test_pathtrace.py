@@ -452,3 +452,81 @@ def test_a_render_farm_tile_of_a_path_traced_image_is_those_rows_of_the_local_re
     top, _ = _render_tile(scene, keys, 5, None, 0, 5)
     bottom, _ = _render_tile(scene, keys, 5, None, 5, 7)
     assert np.array_equal(np.concatenate([top, bottom])[..., :4], local.rgba)
+
+
+@pytest.mark.parametrize("build", [{}, {"lanes": 1, "precision": "double"}])   # (a GPU's lanes)
+def test_a_camera_ray_at_an_area_light_sees_its_radiance(build):
+    # a ball of radiance c I / r^2 and a panel of radiance pi c I / area
+    # facing the camera; a second panel facing away is not there
+    text = f"""
+    scene sphere(0.1).translate((0, 5, -8))      # out of view
+    camera {{ position: (0, -4, 0), target: (0, 0, 0), fov: 40 }}
+    light sphere {{ position: (-0.7, 0, 0), radius: 0.5, intensity: 2, color: (1, 0.5, 0.25) }}
+    light rectangle {{ position: (0.7, 0, 0), direction: (0, -1, 0), width: 0.8, height: 0.8, intensity: 2 }}
+    light rectangle {{ position: (0, 0, 0.9), direction: (0, 1, 0), width: 3, height: 0.4 }}
+    render {{ width: 32, height: 24, integrator: path, {DARK} }}
+    """
+    image = fractalc.loads(text, **build).render(samples=4)
+    columns, rows = np.meshgrid(np.arange(32) + 0.5, np.arange(24) + 0.5)
+    # pixel centres' directions, and which pixels lie wholly inside each light
+    x, y = (columns - 16) / 12 * math.tan(math.radians(20)), (12 - rows) / 12 * math.tan(math.radians(20))
+    pixel = 1 / 12 * math.tan(math.radians(20))
+    ball = np.hypot(x * 4 + 0.7, y * 4) < 0.5 - 4 * pixel * 1.5          # (seen from 4 away, roughly)
+    panel = (np.abs(x * 4 - 0.7) < 0.4 - 4 * pixel) & (np.abs(y * 4) < 0.4 - 4 * pixel)
+    empty = (np.hypot(x * 4 + 0.7, y * 4) > 0.7) & ((np.abs(x * 4 - 0.7) > 0.5) | (np.abs(y * 4) > 0.5))
+    assert ball.sum() > 12 and panel.sum() > 12 and empty.sum() > 400
+    rgb = image.rgba[..., :3]
+    np.testing.assert_allclose(rgb[ball], np.broadcast_to([8, 4, 2], (ball.sum(), 3)), rtol=1e-5)
+    np.testing.assert_allclose(rgb[panel], math.pi * 2 / 0.64, rtol=1e-5)
+    assert np.all(rgb[empty] == 0), "the panel facing away, and the dark sky, show nothing"
+    assert np.all(image.rgba[..., 3][ball | panel] == 0), "lights are not the scene's surfaces: no coverage"
+
+
+MIS_SCENE = f"""
+material floor {{ color: (0.6, 0.6, 0.6), specular: 0 }}
+material ball {{ color: (0.8, 0.5, 0.3), specular: 0 }}
+scene sphere(0.5).translate((0, 0, 0.5)).material(ball) | plane().material(floor)
+camera {{ position: (0, -3, 2), target: (0, 0, 0.3), fov: 50 }}
+light sphere {{ position: (-0.8, 0.3, 1.6), radius: 0.3, intensity: 3 }}
+light rectangle {{ position: (0.9, 0, 1.4), direction: (-0.3, 0, -1), width: 1, height: 0.6, intensity: 3 }}
+render {{ width: 32, height: 24, integrator: path, bounces: 2, environment: {{ intensity: 0.5 }} }}
+"""
+
+
+def renders(text, monkeypatch, mis, seeds, samples, **keys):
+    from fractalc import pathtrace
+    monkeypatch.setattr(pathtrace, "MIS", mis)
+    scene = fractalc.loads(text)
+    return np.array([scene.render(samples=samples, seed=seed, **keys).rgba[..., :3] for seed in seeds], dtype=float)
+
+
+def test_multiple_importance_sampling_agrees_with_next_event_estimation_alone(tmp_path, monkeypatch):
+    # a diffuse ball and floor under a sphere light, a rectangle light and an
+    # environment map: both estimators are unbiased, so their means agree
+    # within their standard errors (independent seeds; the lights seen
+    # directly, the same in both, left out)
+    rows = np.linspace(1, 0, 32)[:, None, None]
+    write_map(tmp_path / "sky.exr", np.broadcast_to(np.array([0.3, 0.5, 1.0]) * rows + 0.1, (32, 64, 3)))
+    keys = {"environment_map": str(tmp_path / "sky.exr")}
+    mis = renders(MIS_SCENE, monkeypatch, True, range(8), 16, **keys)
+    alone = renders(MIS_SCENE, monkeypatch, False, range(100, 108), 16, **keys)
+    surface = alone.mean(axis=0) < 5
+    difference = (mis.mean(axis=0) - alone.mean(axis=0))[surface].sum()
+    error = math.sqrt(((mis.var(axis=0, ddof=1) + alone.var(axis=0, ddof=1)) / 8)[surface].sum())
+    assert surface.sum() > 2000 and abs(difference) < 3 * error, (difference, error)
+
+
+def test_multiple_importance_sampling_lowers_the_error_on_a_glossy_floor_under_a_large_light(monkeypatch):
+    # the panel's reflection in a sharp glossy floor: next-event estimation
+    # rarely draws a point in the narrow lobe, the lobe finds the panel
+    text = f"""
+    material floor {{ color: (0.5, 0.5, 0.5), specular: 1, shininess: 400 }}
+    scene plane().material(floor)
+    camera {{ position: (0, -3, 1.5), target: (0, 0, 0), fov: 50 }}
+    light rectangle {{ position: (0, 2, 1.5), direction: (0, -1, -0.6), width: 4, height: 2, intensity: 8 }}
+    render {{ width: 32, height: 24, integrator: path, bounces: 1, {DARK} }}
+    """
+    reference = renders(text, monkeypatch, True, [99], 512)[0]
+    error = {mis: np.sqrt(((renders(text, monkeypatch, mis, range(3), 16) - reference) ** 2).mean(axis=(1, 2, 3))).mean()
+             for mis in (True, False)}
+    assert error[True] < error[False] / 3, error
