@@ -983,9 +983,9 @@ RENDER_KEYS = _keys(
     _P("precision", "word:float|double"), _P("reflections", "int", None, "0..16"),
     _P("glow", "block:glow"), _P("fog", "block:fog"), _P("slice", "block:slice"),
     _P("ao_method", "word:normal|steps"), _P("dither", "num", None, "0..1"),
-    _P("overrelax", "num", None, "1..1.99"),
+    _P("overrelax", "num", None, "1..1.99"), _P("cone_marching", "word:on|off"),
     _P("epsilon_scale", "num", None, ">0", f"<={MAX_EPSILON_SCALE:g}"),
-    _P("normals", "word:tetrahedral|central"), _P("fast_math", "word:auto|on|off"),
+    _P("normals", "word:tetrahedral|central|forward"), _P("fast_math", "word:auto|on|off"),
     _P("exposure", "num", None, "-20..20"), _P("tonemap", "word:none|reinhard|aces"),
     _P("integrator", "word:direct|path"), _P("bounces", "int", None, "1..64"),
     _P("environment", "block:environment"))

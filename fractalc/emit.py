@@ -490,6 +490,9 @@ def features(scene_ir: SceneIR) -> dict[str, bool]:
         # glow and step-count AO show the plain march (its closest approach,
         # its steps), which longer steps would skip through
         "OVERRELAX": render.overrelax > 1 and not glow and not step_ao,
+        # a packet's cone (CPU lanes only: emit() clears it for one ray per
+        # work-item) skips what glow and step-count AO read, as above
+        "CONE": render.cone_marching == "on" and not glow and not step_ao,
         # glow needs every miss's closest approach, so misses must be marched
         "SCENE_BOUND": bounded and not glow,
         "SCENE_HALF_SPACES": bounded and half_spaces and not glow,
@@ -666,7 +669,8 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
     lib = library()
     scene = scene_ir.scene
     distance = function_source(scene_ir.distance, "real distance_estimate(vec3 p, __constant scalar *params)")
-    on = {**features(scene_ir), "COUNT": target.count}
+    on = features(scene_ir)
+    on = {**on, "CONE": on["CONE"] and target.lanes > 1, "COUNT": target.count}
     shade, shading_needs = _shade_function(scene_ir, on)
     # the bound serves the march (not with glow) and the shadow rays
     shadows = any(light.shadows != "none" for light in scene.lights)
@@ -693,16 +697,53 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         lib.prelude,
         _library_text(scene_functions),
         "// ---- the scene " + "-" * 60,
-        distance, _surface_function(scene_ir), bound,
+        distance, _uniform_copy(lib.prelude, scene_functions, distance) if on["CONE"] else "",
+        _surface_function(scene_ir), bound,
         resolve_features(_library_text(shading_functions), on),
-        f"vec3 estimate_normal(vec3 p, real h, __constant scalar *params) {{\n"
-        f"    return {normal_method}(p, h, params);\n}}",
+        _normal_functions(scene.render.normals),
         shade,
         resolve_features(lib.template, on),
         pathtrace.source(scene, literal, on["TRANSPARENCY"]) if on["PATH_TRACE"] else "",
     ]
     source = "\n\n".join(p.strip("\n") for p in parts if p) + "\n"
     return double_literals(source) if target.double else source
+
+
+# The per-ray names of the prelude and what a distance estimate's text may
+# use, and their scalar forms (the prelude's LANES 1 definitions).
+_UNIFORM_NAMES = {"real": "scalar", "mask": "int", "lane_int": "int", "lane_uint": "uint", "lane_float": "float",
+                  "vec3": "uvec3", "MASK_TRUE": "1", "ANY": "", "ALL": "", "SELECT": "UNIFORM_SELECT",
+                  "TO_REAL": "(scalar)", "TO_FLOAT": "(float)", "TO_UINT": "(uint)"}
+_FUNCTION_NAME = re.compile(r"^\w+ (\w+)\(", re.M)
+_IDENTIFIER = re.compile(r"\b[A-Za-z_]\w*\b")
+
+
+def _uniform_copy(prelude: str, functions, distance: str) -> str:
+    """`uniform_distance_estimate`: the scene's distance estimate (and the
+    vec3 helpers and library functions it calls) in scalar types, for one
+    point shared by all the rays of a work-item (cone marching). The same
+    text with the per-ray types renamed: the library is written to compile
+    with one ray per work-item, which is this."""
+    vectors = prelude[prelude.index("typedef struct { real x, y, z; } vec3;"):]
+    text = "\n\n".join([vectors, *(f.source for f in functions), distance])
+    renames = {**_UNIFORM_NAMES, **{name: f"uniform_{name}" for name in _FUNCTION_NAME.findall(text)}}
+    renamed = _IDENTIFIER.sub(lambda m: renames.get(m.group(0), m.group(0)), text)
+    return ("// The distance estimate in scalar types, at one point for a work-item's rays (cone marching)\n"
+            "#define UNIFORM_SELECT(if_false, if_true, m) ((m) ? (if_true) : (if_false))\n" + renamed)
+
+
+def _normal_functions(method: str) -> str:
+    """`estimate_normal` at any point, and `estimate_hit_normal` where a
+    march hit with the estimate `here`, which forward differences reuse."""
+    if method == "forward":
+        return ("vec3 estimate_normal(vec3 p, real h, __constant scalar *params) {\n"
+                "    return forward_normal(p, distance_estimate(p, params), h, params);\n}\n\n"
+                "vec3 estimate_hit_normal(vec3 p, real here, real h, __constant scalar *params) {\n"
+                "    return forward_normal(p, here, h, params);\n}")
+    return (f"vec3 estimate_normal(vec3 p, real h, __constant scalar *params) {{\n"
+            f"    return {method}_normal(p, h, params);\n}}\n\n"
+            f"vec3 estimate_hit_normal(vec3 p, real here, real h, __constant scalar *params) {{\n"
+            f"    return {method}_normal(p, h, params);\n}}")
 
 
 _FLOAT_LITERAL = re.compile(r"\b((?:\d+\.\d*|\.\d+)(?:[eE][+-]?\d+)?|\d+[eE][+-]?\d+)f\b")

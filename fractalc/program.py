@@ -241,6 +241,7 @@ class RenderSettings:
     ao_method: str = "normal"        # normal: sample along the normal; steps: from the step count
     dither: float = 1.0              # random fraction of the first step, against banding
     overrelax: float = 1.3           # over-relaxation factor of sphere tracing (1 = plain)
+    cone_marching: str = "on"        # march a work-item's packet of camera rays as one cone first (CPU lanes)
     epsilon_scale: float = 1.0       # multiplies the hit threshold (a quality knob)
     normals: str = "tetrahedral"     # finite differences: tetrahedral (4 evaluations) or central (6)
     fast_math: str = "auto"          # on: native_ transcendental functions; auto: on CPUs

@@ -39,8 +39,9 @@ KNOB_GRID = {
     "max_steps": (64, 128, 256, 512),
     "precision": ("float", "double"),
     "fast_math": ("off", "on"),
-    "normals": ("tetrahedral", "central"),
+    "normals": ("tetrahedral", "central", "forward"),
     "overrelax": (1.0, 1.3, 1.6),
+    "cone_marching": ("off", "on"),
     "samples": (1, 4),
 }
 KNOBS = tuple(KNOB_GRID)
@@ -76,12 +77,12 @@ def scene_settings(scene: Scene) -> dict:
 
 def reference_settings(settings: dict) -> dict:
     """The reference for `settings`: double, a tenth of the scene's hit
-    threshold, four times its steps, plain sphere tracing, exact functions,
-    the same samples and normals."""
+    threshold, four times its steps, plain sphere tracing (no cone), exact
+    functions, the same samples and normals."""
     return {**settings, "precision": "double",
             "epsilon_scale": settings["epsilon_scale"] * REFERENCE_EPSILON_SCALE,
             "max_steps": settings["max_steps"] * REFERENCE_STEPS,
-            "fast_math": "off", "overrelax": 1.0}
+            "fast_math": "off", "overrelax": 1.0, "cone_marching": "off"}
 
 
 def label(changes: dict) -> str:
@@ -341,7 +342,7 @@ def table(result: SweepResult) -> str:
         ("time", f"median of {result.repeat} renders after a warm-up render, taken in rounds over the "
                  f"rows (compile time apart)"),
         ("reference", f"double, epsilon_scale x{REFERENCE_EPSILON_SCALE:g}, max_steps x{REFERENCE_STEPS}, "
-                      f"fast_math off, overrelax 1, the row's samples"),
+                      f"fast_math off, overrelax 1, cone_marching off, the row's samples"),
         ("colour error", "on sRGB (linear clipped to [0, 1]); PSNR = 20 log10(1 / RMSE)"),
         ("depth error", "|Z - Z_ref| on pixels both hit, scene units"),
         *machine_rows(result.machine),

@@ -34,34 +34,129 @@
 
 // Hart's clarity function: the hit threshold grows with t by the angle one
 // pixel subtends, or stays the scene's constant epsilon.
-real hit_threshold(real t, scalar pixel_angle) {
 #if HIT_EPSILON_IS_PIXEL
-    return max(t * (pixel_angle * EPSILON_SCALE), (real)SCALAR_MIN_EPSILON);
+#define HIT_THRESHOLD(t, pixel_angle) max((t) * ((pixel_angle) * EPSILON_SCALE), SCALAR_MIN_EPSILON)
 #else
-    return (real)(HIT_EPSILON * EPSILON_SCALE);
+#define HIT_THRESHOLD(t, pixel_angle) (HIT_EPSILON * EPSILON_SCALE)
 #endif
+real hit_threshold(real t, scalar pixel_angle) {
+    return (real)HIT_THRESHOLD(t, pixel_angle);
 }
 
 typedef struct {
     real t;        // ray distance of the hit
     mask hit;
     real steps;    // distance evaluations taken
+    real d;        // the distance estimate at t where the lane hit (normals reuse it)
 #if FEATURE_GLOW
     real closest;  // the smallest distance estimate along the ray
 #endif
 } march_result;
 
+#if FEATURE_CONE
+// Cone marching hands a packet over to its rays where the distance at its
+// axis falls below CONE_STOP times its spread.
+#define CONE_STOP 2.0f
+
+// Reductions over the lanes of a work-item (its packet of rays).
+scalar lanes_sum(real v) {
+    scalar lanes[LANES];
+    STORE_LANES(v, 0, lanes);
+    scalar sum = lanes[0];
+    for (int i = 1; i < LANES; i++)
+        sum += lanes[i];
+    return sum;
+}
+
+scalar lanes_max(real v) {
+    scalar lanes[LANES];
+    STORE_LANES(v, 0, lanes);
+    scalar most = lanes[0];
+    for (int i = 1; i < LANES; i++)
+        most = max(most, lanes[i]);
+    return most;
+}
+
+// Cone marching of a packet (cone tracing, Amanatides 1984, marched as the
+// demoscene does): one distance at the packet's axis point c(t) = o + t d
+// (o, d: the mean origin and direction of its rays) bounds the distance at
+// each ray's point at t, which lies within spread(t) = max |o_i - o| +
+// t max |d_i - d| of c(t); while d(c) > spread, every ray may go on by
+// d(c) - spread. Where d(c) < CONE_STOP spread (the cone could step only
+// a little) the rays are marched one by one from the t reached: far from
+// the surface, one evaluation instead of one per ray and step. The axis
+// point is one point for all lanes, so it is evaluated with scalar
+// arithmetic (`uniform_distance_estimate`, the scene's estimate in scalar
+// types): a fraction of a vector step's cost. `t_enter`, `t_exit`: where
+// each ray's marching may start and must end; `steps`: the cone's steps,
+// which are its rays' first march steps (each ray's steps, max_steps
+// included, count them).
+real cone_start(vec3 origin, vec3 dir, mask active, real t_enter, real t_exit, scalar pixel_angle,
+                int *steps, __constant scalar *params) {
+    *steps = 0;
+    if (!ANY(active))
+        return t_enter;
+    real weight = SELECT((real)0.0f, (real)1.0f, active);
+    scalar share = 1.0f / lanes_sum(weight);
+    uvec3 o = uniform_v3(share * lanes_sum(weight * origin.x), share * lanes_sum(weight * origin.y),
+                         share * lanes_sum(weight * origin.z));
+    uvec3 d = uniform_v3(share * lanes_sum(weight * dir.x), share * lanes_sum(weight * dir.y),
+                         share * lanes_sum(weight * dir.z));
+    vec3 axis_origin = v3((real)o.x, (real)o.y, (real)o.z), axis_dir = v3((real)d.x, (real)d.y, (real)d.z);
+    real own_origin = v3_length(v3_sub(origin, axis_origin)), own_dir = v3_length(v3_sub(dir, axis_dir));
+    scalar spread_origin = lanes_max(weight * own_origin), spread_dir = lanes_max(weight * own_dir);
+    scalar t = -lanes_max(SELECT((real)-MAX_DISTANCE, -t_enter, active));
+    scalar t_last = lanes_max(SELECT((real)0.0f, t_exit, active));
+    // over-relaxed as the rays are, with the same fallback
+    scalar omega = 1.0f, previous_clear = 0.0f, step = 0.0f;
+#if FEATURE_OVERRELAX
+    omega = OVERRELAX;
+#endif
+    scalar distance = 0.0f, t_evaluated = -1.0f;
+    for (int i = 0; i < MAX_STEPS && t < t_last; i++) {
+#if FEATURE_COUNT
+        count_evaluations(COUNT_CAMERA, (LANE_X == 0.0f) & (LANE_Y == 0.0f), 1.0f, params);
+#endif
+        distance = uniform_distance_estimate(uniform_v3_add(o, uniform_v3_scale(d, t)), params);
+        t_evaluated = t;
+        *steps = i + 1;
+        // the radius of the empty ball about every ray's point at t
+        scalar clear = distance - (spread_origin + t * spread_dir);
+        if (omega > 1.0f && clear + previous_clear < step) {
+            t -= step;
+            clear = previous_clear;
+            omega = 1.0f;
+        }
+        // (not below the rays' hit threshold: a cone from one point, with no
+        // spread, would otherwise creep towards the surface)
+        if (clear <= max((CONE_STOP - 1.0f) * (spread_origin + t * spread_dir), HIT_THRESHOLD(t, pixel_angle)))
+            break;
+        previous_clear = clear;
+        step = omega * clear;
+        t += step;
+    }
+    // where the last ball still holds the point of t: it reaches further
+    // along the rays nearer the axis (each within its own spread of it)
+    real further = (real)0.0f;
+    if (t_evaluated == t)
+        further = max((real)distance - (own_origin + (real)t * own_dir), (real)0.0f);
+    return (real)t + further;
+}
+#endif
+
 // Sphere tracing of LANES rays at once; a lane stops on a hit (distance
 // below the threshold, or <= 0 at the start: a camera inside a solid hits at
 // t = 0), past MAX_DISTANCE, or after MAX_STEPS. `jitter` in [0, 1) shortens
 // the first step by that fraction (dithering against banding, Syntopia part
-// II: steps and glow then vary smoothly between neighbouring pixels).
-march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real jitter,
-                   __constant scalar *params) {
+// II: steps and glow then vary smoothly between neighbouring pixels). A
+// `packet` of rays (the camera's, uniform) is cone-marched first.
+march_result march_rays(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real jitter, int packet,
+                        __constant scalar *params) {
     march_result r;
     r.t = 0.0f;
     r.hit = (mask)0;
     r.steps = 0.0f;
+    r.d = 0.0f;
 #if FEATURE_GLOW
     r.closest = (real)MAX_DISTANCE;
 #endif
@@ -92,7 +187,21 @@ march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real 
 #endif
     active = active & in_bound;
 #endif
-    for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
+    int first_step = 0;     // a ray's steps before its own: its cone's
+#if FEATURE_CONE
+    if (packet) {
+        int cone_steps;
+        real t_last = (real)MAX_DISTANCE;
+#if FEATURE_SCENE_BOUND
+        t_last = t_exit;
+#endif
+        r.t = max(r.t, cone_start(origin, dir, active, r.t, t_last, pixel_angle, &cone_steps, params));
+        r.steps = SELECT((real)0.0f, (real)cone_steps, active);
+        first_step = cone_steps;
+        active = active & (r.t <= t_last);
+    }
+#endif
+    for (int i = first_step; i < MAX_STEPS && ANY(active); i++) {
 #if FEATURE_COUNT
         count_evaluations(march_purpose(params), active, 1.0f, params);
 #endif
@@ -115,9 +224,10 @@ march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real 
 #endif
         mask close = (d < hit_threshold(r.t, pixel_angle)) | (d <= 0.0f);
         r.hit = r.hit | (active & close);
+        r.d = SELECT(r.d, d, active & close);
         active = active & !close;
 #if FEATURE_DITHER
-        if (i == 0)
+        if (i == first_step)
             d = d * (1.0f - jitter);
 #endif
 #if FEATURE_OVERRELAX
@@ -132,6 +242,17 @@ march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real 
 #endif
     }
     return r;
+}
+
+march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real jitter,
+                   __constant scalar *params) {
+    return march_rays(origin, dir, active, pixel_angle, jitter, 0, params);
+}
+
+// The camera's rays through a work-item's pixels: a packet.
+march_result march_camera(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real jitter,
+                          __constant scalar *params) {
+    return march_rays(origin, dir, active, pixel_angle, jitter, 1, params);
 }
 
 vec3 camera_axis(__constant scalar *camera, int first) {
@@ -332,7 +453,7 @@ vec3 hit_normal(vec3 origin, vec3 dir, march_result m, scalar pixel_angle, __con
 #if FEATURE_COUNT
         count_scope(m.hit, params);
 #endif
-        normal = v3_select(normal, estimate_normal(p, hit_threshold(m.t, pixel_angle), params), m.hit);
+        normal = v3_select(normal, estimate_hit_normal(p, m.d, hit_threshold(m.t, pixel_angle), params), m.hit);
     }
     return normal;
 }
@@ -562,7 +683,7 @@ __kernel void render(__global float *out, __constant scalar *params,
 #if FEATURE_COUNT
     count_march_purpose(COUNT_CAMERA, params);
 #endif
-    march_result centre = march(origin, dir, inside & seen, pixel_angle, jitter, params);
+    march_result centre = march_camera(origin, dir, inside & seen, pixel_angle, jitter, params);
     vec3 normal = hit_normal(origin, dir, centre, pixel_angle, params);
 
     vec3 color;
@@ -599,7 +720,7 @@ __kernel void render(__global float *out, __constant scalar *params,
 #if FEATURE_COUNT
             count_march_purpose(COUNT_CAMERA, params);
 #endif
-            march_result m = march(sample_origin, sample_dir, inside & sample_seen, pixel_angle, jitter, params);
+            march_result m = march_camera(sample_origin, sample_dir, inside & sample_seen, pixel_angle, jitter, params);
             vec3 sample_normal = hit_normal(sample_origin, sample_dir, m, pixel_angle, params);
 #if FEATURE_PATH_TRACE
             color = v3_add(color, path_color(sample_origin, sample_dir, m, sample_normal, pixel_angle, key, params));

@@ -112,7 +112,8 @@ RENDER_KEYS = {
     "overrelax": ("num", Range(1, 1.99)), "epsilon_scale": ("num", Range(0, 1000, lo_open=True)),
 }
 RENDER_WORDS = {"precision": ("float", "double"), "ao_method": ("normal", "steps"),
-                "normals": ("tetrahedral", "central"), "fast_math": ("auto", "on", "off")}
+                "normals": ("tetrahedral", "central", "forward"), "fast_math": ("auto", "on", "off"),
+                "cone_marching": ("on", "off")}
 EFFECT_BLOCKS = {
     "glow": {"color": ("vec3", NON_NEGATIVE), "strength": ("num", NON_NEGATIVE), "radius": ("num", POSITIVE)},
     "fog": {"color": ("vec3", NON_NEGATIVE), "density": ("num", NON_NEGATIVE)},

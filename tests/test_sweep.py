@@ -172,7 +172,7 @@ def test_compare_measures_what_it_says():
 
 def row(name, ms, rmse, samples=1, reference=False, **knobs):
     settings = {"epsilon_scale": 1.0, "max_steps": 256, "precision": "float", "fast_math": "off",
-                "normals": "tetrahedral", "overrelax": 1.0, "samples": samples, **knobs}
+                "normals": "tetrahedral", "overrelax": 1.0, "cone_marching": "on", "samples": samples, **knobs}
     error = ImageError(0.0, 0.0, 0.0, rmse, math.inf if rmse == 0 else 20 * math.log10(1 / rmse))
     return SweepRow(name, reference, settings, 0.0, ms, ms, ms, 10.0, error)
 

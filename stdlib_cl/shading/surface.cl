@@ -1,7 +1,8 @@
 // Surface normals and Blinn-Phong lighting. Normals are the normalised
 // gradient of the distance by finite differences with a step h tied to the
 // hit threshold, so that detail below the pixel footprint is not amplified:
-// tetrahedral (4 evaluations, Quilez "normals for an SDF") or central (6).
+// tetrahedral (4 evaluations, Quilez "normals for an SDF"), central (6), or
+// forward (3: the march's last evaluation, at the hit, is the fourth).
 vec3 tetrahedral_normal(vec3 p, real h, __constant scalar *params) {
 #if FEATURE_COUNT
     count_evaluations(COUNT_NORMALS, scoped(params), 4.0f, params);
@@ -13,6 +14,19 @@ vec3 tetrahedral_normal(vec3 p, real h, __constant scalar *params) {
     // differences first: a sum of two estimates near float's largest (a
     // point deep inside a far plane) would overflow
     return v3_normalize(v3((a - b) + (d - c), (c - a) + (d - b), (b - a) + (d - c)));
+}
+
+// Forward differences from `p`, whose estimate `here` the march already
+// took: one evaluation fewer than the tetrahedron, with a first-order error
+// (h times the surface's curvature; h is one hit threshold).
+vec3 forward_normal(vec3 p, real here, real h, __constant scalar *params) {
+#if FEATURE_COUNT
+    count_evaluations(COUNT_NORMALS, scoped(params), 3.0f, params);
+#endif
+    real dx = distance_estimate(v3(p.x + h, p.y, p.z), params) - here;
+    real dy = distance_estimate(v3(p.x, p.y + h, p.z), params) - here;
+    real dz = distance_estimate(v3(p.x, p.y, p.z + h), params) - here;
+    return v3_normalize(v3(dx, dy, dz));
 }
 
 vec3 central_normal(vec3 p, real h, __constant scalar *params) {

@@ -15,9 +15,11 @@ import numpy as np
 import pytest
 
 import fractalc
+from fractalc.count import count
 import reference_fractals as ref
 from fractalc.program import RenderSettings
 from fractalc.sweep import compare
+from fractalc.write import linear_to_srgb
 from test_effects import ray_sphere
 from test_fractals import bounded_reference_de, primary_rays, sphere_trace
 
@@ -62,9 +64,19 @@ def test_every_plane_is_finite(name):
 @pytest.mark.parametrize("name", sorted(p.stem for p in HERE.glob("*.frac")))
 def test_float_and_double_shade_alike(name):
     # at these scales rounding moves nothing visible: the same hits and the
-    # same colours, shadow rays and occlusion included
-    error = compare(rendered(name), rendered(name, "double"))
-    assert error.hit_mismatch <= 0.01 and error.color_rmse < 0.005, error
+    # same colours, shadow rays and occlusion included, but for a shadow ray
+    # that grazes an occluder within the hit threshold, which rounding
+    # decides (a knife edge: on mandelbox_scale_minus_1_5, moving the camera
+    # by 0.002 put one such pixel of 1728 in the image in 1 to 3 of 8 views,
+    # with or without cone marching); at most 2 pixels in 1000 may flip
+    float_, double = rendered(name), rendered(name, "double")
+    error = compare(float_, double)
+    assert error.hit_mismatch <= 0.01, error
+    difference = linear_to_srgb(float_.rgba[..., :3].astype(np.float64)) - linear_to_srgb(
+        double.rgba[..., :3].astype(np.float64))
+    knife_edges = np.abs(difference).max(axis=-1) > 0.1
+    assert knife_edges.mean() <= 0.002, error
+    assert np.sqrt(np.mean(difference[~knife_edges] ** 2)) < 0.005, error
 
 
 # ---------------------------------------------------------- the camera 1e-3 from a surface
@@ -122,7 +134,7 @@ def grazing_prediction(s, overrelax):
 @pytest.mark.parametrize("precision", PRECISIONS)
 def test_grazing_rays_hit_the_plane_where_the_march_predicts(precision, overrelax):
     s = scene("grazing_plane", precision)
-    image = s.render(overrelax=overrelax)
+    image = s.render(overrelax=overrelax, cone_marching="off")     # the prediction is one ray's march
     slope, steps, depth = grazing_prediction(s, overrelax)
     render = s.checked.render
     reached = (steps <= render.max_steps - 1) & (depth < render.max_distance)
@@ -141,6 +153,49 @@ def test_grazing_rays_hit_the_plane_where_the_march_predicts(precision, overrela
     assert np.allclose(image.depth[reached], depth[reached], rtol=1e-4, atol=1e-5)
 
 
+def test_cone_marched_grazing_rays_hit_the_plane_and_save_steps():
+    """Cone marching (a packet of rays marched as one cone first, the
+    default with CPU lanes) on rays grazing a plane: every ray that one ray's
+    march brings to the plane within max_steps still hits it, within the
+    threshold above it, none above the horizon hits, and the packets take
+    fewer evaluations in all (a cone step is one for all its rays)."""
+    s = scene("grazing_plane")
+    if s.lanes_in_use == 1:
+        pytest.skip("one ray per work-item: no packet to cone-march")
+    render = s.checked.render
+    slope, steps, _ = grazing_prediction(s, render.overrelax)
+    reached = (steps <= render.max_steps - 1) & (steps < 100)
+    cone = s.render(cone_marching="on")
+    hit = np.isfinite(cone.depth)
+    assert reached.sum() >= 200 and hit[reached].all()
+    assert not hit[slope <= 0].any()
+    origin, directions = rays(s)
+    height = origin[2] + cone.depth[hit] * directions[hit][:, 2]
+    assert np.all(height < render.epsilon * 1.0001) and np.all(height > -1e-5)
+    text = (HERE / "grazing_plane.frac").read_text()
+    evaluations = {c: count(fractalc.loads(text.replace("render {", f"render {{ cone_marching: {c},")))
+                   .evaluations["camera"] for c in ("on", "off")}
+    assert evaluations["on"] < 0.9 * evaluations["off"], evaluations
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in HERE.glob("*.frac")))
+def test_cone_marching_leaves_each_hard_case_as_it_was(name):
+    """The same image with the cone as without, within the error that one
+    ray's march itself has: against a reference (double, a tenth of the
+    threshold, plain steps, no cone), the cone's hit mismatch is no worse
+    (but for one pixel), its depth p99 within 2% and its colour RMSE within
+    the 1% that issue 13 allows."""
+    s = scene(name)
+    render = s.checked.render
+    reference = scene(name, "double").render(epsilon_scale=0.1, max_steps=4 * render.max_steps,
+                                             overrelax=1.0, cone_marching="off")
+    cone, rays_alone = (compare(s.render(cone_marching=c), reference) for c in ("on", "off"))
+    assert cone.hit_mismatch <= rays_alone.hit_mismatch + 1 / (render.width * render.height), (cone, rays_alone)
+    if np.isfinite(rays_alone.depth_error_p99):
+        assert cone.depth_error_p99 <= 1.02 * rays_alone.depth_error_p99, (cone, rays_alone)
+    assert cone.color_rmse <= 1.01 * rays_alone.color_rmse, (cone, rays_alone)
+
+
 # ---------------------------------------------------------- the camera inside a solid
 
 @pytest.mark.parametrize("name", ["inside_sphere_centre", "inside_mandelbulb"])
@@ -148,7 +203,9 @@ def test_camera_inside_hits_everything_at_zero(name):
     s = scene(name)
     assert s.distance(np.array([s.checked.camera.position], dtype=float))[0] <= 0
     image = rendered(name)
-    assert np.all(image.depth == 0) and np.all(image.steps == 1)
+    # one evaluation at t = 0 per ray, and with CPU lanes first the packet's
+    # cone's there (which finds the camera inside: a march step of its rays)
+    assert np.all(image.depth == 0) and np.all(image.steps == (2 if s.lanes_in_use > 1 else 1))
     assert np.all(image.rgba[..., 3] == 1) and image.rgba[..., :3].max() < 20
 
 
