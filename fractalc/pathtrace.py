@@ -1,7 +1,10 @@
 """The path tracer's part of a kernel (render key `integrator: path`,
-docs/looks.md#path-tracing): its constants (bounces, the environment, the
-lights as a table) and the library file stdlib_cl/pathtrace.cl, which the
-emitter places after the template."""
+docs/looks.md#path-tracing): its constants (bounces, the lights as a
+table) and the library file stdlib_cl/pathtrace.cl, which the emitter
+places after the template; and the environment's constants, which both
+integrators use: the sky or map, the map's sampling tables, and the
+irradiance that lights the direct renderer's surfaces as spherical
+harmonics (docs/looks.md#environment)."""
 from __future__ import annotations
 
 import math
