@@ -202,14 +202,14 @@ def test_promising_knobs_are_combined_least_harmful_first():
 
 def test_grid_moves_one_knob_away_from_the_scene_and_the_reference_is_finer():
     settings = {"epsilon_scale": 1.0, "max_steps": 200, "precision": "float", "fast_math": "off",
-                "normals": "tetrahedral", "overrelax": 1.0, "samples": 4}
+                "normals": "tetrahedral", "overrelax": 1.0, "cone_marching": "on", "samples": 4}
     changes = one_knob_changes(settings)
     assert all(len(c) == 1 and settings[k] != v for c in changes for k, v in c.items())
     expected = sum(len([v for v in values if v != settings[k]]) for k, values in KNOB_GRID.items())
-    assert len(changes) == expected == 3 + 4 + 1 + 1 + 1 + 2 + 1     # 200 is not in the steps grid
+    assert len(changes) == expected == 3 + 4 + 1 + 1 + 2 + 2 + 1 + 1     # 200 is not in the steps grid
     reference = reference_settings({**settings, "epsilon_scale": 2.0, "fast_math": "on"})
     assert reference == {**settings, "epsilon_scale": 0.2, "max_steps": 800, "precision": "double",
-                         "fast_math": "off"}
+                         "fast_math": "off", "cone_marching": "off"}
 
 
 def test_auto_fast_math_is_the_scenes_row_as_it_runs_on_the_device():
