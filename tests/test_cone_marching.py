@@ -92,7 +92,10 @@ render { width: 48, height: 36, dither: 0, cone_marching: CONE }
 
 
 def test_the_cone_saves_camera_evaluations():
-    on, off = (count(fractalc.loads(BOUNDED.replace("CONE", cone), lanes=16)) for cone in ("on", "off"))
+    scenes = {cone: fractalc.loads(BOUNDED.replace("CONE", cone), lanes=16) for cone in ("on", "off")}
+    on, off = (count(scenes[cone]) for cone in ("on", "off"))
     assert on.evaluations["camera"] < 0.8 * off.evaluations["camera"], (on.evaluations, off.evaluations)
+    # a cone step is a march step of each of its rays, one evaluation for all
+    assert on.evaluations["camera"] < 0.8 * scenes["on"].render().steps.sum()
     # the rest of the render is unchanged work: the same hits get normals
     assert on.evaluations["normals"] == pytest.approx(off.evaluations["normals"], rel=0.02)

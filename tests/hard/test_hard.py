@@ -178,8 +178,9 @@ def test_cone_marched_grazing_rays_hit_the_plane_and_save_steps():
     assert evaluations["on"] < 0.9 * evaluations["off"], evaluations
 
 
-@pytest.mark.parametrize("name", sorted(p.stem for p in HERE.glob("*.frac")))
+@pytest.mark.parametrize("name", sorted(p.stem for p in HERE.glob("*.frac") if not p.stem.startswith("inside_")))
 def test_cone_marching_leaves_each_hard_case_as_it_was(name):
+    # (a camera inside a solid marches nothing: see below)
     """The same image with the cone as without, within the error that one
     ray's march itself has: against a reference (double, a tenth of the
     threshold, plain steps, no cone), the cone's hit mismatch is no worse
