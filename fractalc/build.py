@@ -214,16 +214,45 @@ def build(source: str, device: Device, options: tuple[str, ...] = (), use_cache:
     if use_cache and key in _programs:
         return _programs[key]
     _mark_building()
-    program = _compile(source, device, options)
-    if not _has_kernels(program, kernels):
-        shutil.rmtree(driver_cache_dir(), ignore_errors=True)
-        # a new option is a new cache key for the driver and pyopencl alike
-        program = _compile(source, device, options + ("-D FRACTALC_REBUILT=1",))
+    with _building_alone(key):
+        program = _compile(source, device, options)
         if not _has_kernels(program, kernels):
-            _build_failed(source, "the built program has no kernels (a driver cache problem?)")
+            shutil.rmtree(driver_cache_dir(), ignore_errors=True)
+            # a new option is a new cache key for the driver and pyopencl alike
+            program = _compile(source, device, options + ("-D FRACTALC_REBUILT=1",))
+            if not _has_kernels(program, kernels):
+                _build_failed(source, "the built program has no kernels (a driver cache problem?)")
     statistics.builds += 1
     _programs[key] = program
     return program
+
+
+def build_lock_path(key: str):
+    """The lock file of a build key: one of 256 (unrelated kernels rarely
+    share one; when they do, they build one after the other)."""
+    return cache_dir() / "locks" / hashlib.sha256(key.encode()).hexdigest()[:2]
+
+
+@contextmanager
+def _building_alone(key: str):
+    """Hold a lock on `key` (a source and device) across processes while it
+    builds: two processes building one kernel at once into the shared
+    driver cache (two renders, a render farm's local workers, parallel
+    tests) made PoCL fail the build. Kernels of other sources build at the
+    same time. (No lock where the platform has no fcntl.)"""
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    path = build_lock_path(key)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 def _has_kernels(program, kernels: tuple[str, ...]) -> bool:

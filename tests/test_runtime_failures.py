@@ -93,3 +93,24 @@ def test_an_interrupted_render_waits_for_the_tiles_it_queued():
     with pytest.raises(KeyboardInterrupt):
         run.render(program, watched, frame, [], target.lanes, target.double, interrupt)
     assert RecordingQueue.finished == 1
+
+
+def test_a_kernel_builds_in_one_process_at_a_time(tmp_path, monkeypatch):
+    """Two processes building one kernel at once into the shared driver
+    cache made PoCL fail the build (seen with two test processes): a build
+    holds its key's lock, which another process cannot take meanwhile; a
+    different key's lock it can."""
+    monkeypatch.setenv("FRACTALC_CACHE_DIR", str(tmp_path))
+    try_lock = ("import fcntl, sys\n"
+                "with open(sys.argv[1], 'a') as f:\n"
+                "    try:\n        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)\n"
+                "    except BlockingIOError:\n        sys.exit(3)\n")
+    key = "kernel source hash:PoCL:cpu:3.0"
+    other = next(k for k in (f"other kernel {i}" for i in range(100))
+                 if build.build_lock_path(k) != build.build_lock_path(key))
+    with build._building_alone(key):
+        taken = [subprocess.run([sys.executable, "-c", try_lock, str(build.build_lock_path(k))]).returncode
+                 for k in (key, other)]
+    assert taken == [3, 0]
+    after = subprocess.run([sys.executable, "-c", try_lock, str(build.build_lock_path(key))]).returncode
+    assert after == 0, "the lock is released when the build ends"
