@@ -703,7 +703,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         _normal_functions(scene.render.normals),
         shade,
         resolve_features(lib.template, on),
-        pathtrace.source(scene, literal, on["TRANSPARENCY"]) if on["PATH_TRACE"] else "",
+        resolve_features(pathtrace.source(scene, literal, on["TRANSPARENCY"]), on) if on["PATH_TRACE"] else "",
     ]
     source = "\n\n".join(p.strip("\n") for p in parts if p) + "\n"
     return double_literals(source) if target.double else source

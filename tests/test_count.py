@@ -152,6 +152,18 @@ def test_normal_kernels_hold_no_counting_code():
             assert "__constant scalar *params" in source
 
 
+def test_path_traced_bounces_and_light_rays_count_as_reflections_and_shadows():
+    """The path tracer's rays count under their purposes: its bounces as
+    reflections, its rays toward lights and the sky as shadows; the camera's
+    rays are the same work however many bounces follow."""
+    text = LIT.replace("reflections: 1", "integrator: path, samples: 2, bounces: BOUNCES")
+    counts = {b: count(fractalc.loads(text.replace("BOUNCES", str(b)))).evaluations for b in (1, 3)}
+    # one bounce: the direction scattered at the first hit, marched
+    assert counts[1]["reflections"] > 0 and counts[3]["reflections"] > counts[1]["reflections"], counts
+    assert counts[1]["shadows"] > 0 and counts[3]["shadows"] > counts[1]["shadows"], counts
+    assert counts[1]["camera"] == counts[3]["camera"], counts
+
+
 def test_every_evaluation_in_the_counting_build_is_counted():
     scene = fractalc.loads(LIT.replace("reflectivity: 0.5", "reflectivity: 0.5, transparency: 0.5"))
     from dataclasses import replace
