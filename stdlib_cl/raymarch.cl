@@ -136,10 +136,14 @@ real cone_start(vec3 origin, vec3 dir, mask active, real t_enter, real t_exit, s
         t += step;
     }
     // where the last ball still holds the point of t: it reaches further
-    // along the rays nearer the axis (each within its own spread of it)
+    // along the rays nearer the axis (each within its own spread of it),
+    // but not where it is within the hit threshold (a camera that close to
+    // a surface hits at t = 0, as one ray's march has it)
     real further = (real)0.0f;
-    if (t_evaluated == t)
-        further = max((real)distance - (own_origin + (real)t * own_dir), (real)0.0f);
+    if (t_evaluated == t) {
+        real own_clear = (real)distance - (own_origin + (real)t * own_dir);
+        further = SELECT((real)0.0f, own_clear, own_clear > (real)HIT_THRESHOLD(t, pixel_angle));
+    }
     return (real)t + further;
 }
 #endif
