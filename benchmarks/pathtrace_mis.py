@@ -14,11 +14,15 @@ from __future__ import annotations
 import statistics
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 import fractalc
 from fractalc import pathtrace
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from test_pathtrace import DIFFUSE_UNDER_AREA_LIGHTS  # noqa: E402   (the tests' scene)
 
 DARK = "environment: { zenith: (0, 0, 0), horizon: (0, 0, 0), ground: (0, 0, 0) }"
 SCENES = {
@@ -28,14 +32,7 @@ SCENES = {
         camera {{ position: (0, -3, 1.5), target: (0, 0, 0), fov: 50 }}
         light rectangle {{ position: (0, 2, 1.5), direction: (0, -1, -0.6), width: 4, height: 2, intensity: 8 }}
         render {{ integrator: path, bounces: 1, {DARK} }}""",
-    "diffuse, sphere and panel lights": f"""
-        material floor {{ color: (0.6, 0.6, 0.6), specular: 0 }}
-        material ball {{ color: (0.8, 0.5, 0.3), specular: 0 }}
-        scene sphere(0.5).translate((0, 0, 0.5)).material(ball) | plane().material(floor)
-        camera {{ position: (0, -3, 2), target: (0, 0, 0.3), fov: 50 }}
-        light sphere {{ position: (-0.8, 0.3, 1.6), radius: 0.3, intensity: 3 }}
-        light rectangle {{ position: (0.9, 0, 1.4), direction: (-0.3, 0, -1), width: 1, height: 0.6, intensity: 3 }}
-        render {{ integrator: path, bounces: 4, {DARK} }}""",
+    "diffuse, sphere and panel lights": DIFFUSE_UNDER_AREA_LIGHTS + f"render {{ integrator: path, bounces: 4, {DARK} }}",
 }
 SEEDS = (1, 2)
 

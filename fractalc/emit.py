@@ -493,6 +493,8 @@ def features(scene_ir: SceneIR) -> dict[str, bool]:
         # a packet's cone (CPU lanes only: emit() clears it for one ray per
         # work-item) skips what glow and step-count AO read, as above
         "CONE": render.cone_marching == "on" and not glow and not step_ao,
+        # the march keeps its last estimate for the normal that reuses it
+        "FORWARD_NORMALS": render.normals == "forward",
         # glow needs every miss's closest approach, so misses must be marched
         "SCENE_BOUND": bounded and not glow,
         "SCENE_HALF_SPACES": bounded and half_spaces and not glow,
@@ -735,15 +737,13 @@ def _uniform_copy(prelude: str, functions, distance: str) -> str:
 def _normal_functions(method: str) -> str:
     """`estimate_normal` at any point, and `estimate_hit_normal` where a
     march hit with the estimate `here`, which forward differences reuse."""
+    anywhere = at_hit = f"{method}_normal(p, h, params)"
     if method == "forward":
-        return ("vec3 estimate_normal(vec3 p, real h, __constant scalar *params) {\n"
-                "    return forward_normal(p, distance_estimate(p, params), h, params);\n}\n\n"
-                "vec3 estimate_hit_normal(vec3 p, real here, real h, __constant scalar *params) {\n"
-                "    return forward_normal(p, here, h, params);\n}")
-    return (f"vec3 estimate_normal(vec3 p, real h, __constant scalar *params) {{\n"
-            f"    return {method}_normal(p, h, params);\n}}\n\n"
+        anywhere, at_hit = ("forward_normal(p, distance_estimate(p, params), h, params)",
+                            "forward_normal(p, here, h, params)")
+    return (f"vec3 estimate_normal(vec3 p, real h, __constant scalar *params) {{\n    return {anywhere};\n}}\n\n"
             f"vec3 estimate_hit_normal(vec3 p, real here, real h, __constant scalar *params) {{\n"
-            f"    return {method}_normal(p, h, params);\n}}")
+            f"    return {at_hit};\n}}")
 
 
 _FLOAT_LITERAL = re.compile(r"\b((?:\d+\.\d*|\.\d+)(?:[eE][+-]?\d+)?|\d+[eE][+-]?\d+)f\b")

@@ -57,7 +57,7 @@ def uses_environment(render) -> bool:
     """Whether the kernel has the template's `environment` (the sky): an
     `environment` block or map, or the path tracer (lit by the background
     without one)."""
-    return render.environment is not None or render.environment_map is not None or render.integrator == "path"
+    return lights_surfaces(render) or render.integrator == "path"
 
 
 # An environment map is resampled to MAP_WIDTH x MAP_HEIGHT texels in the

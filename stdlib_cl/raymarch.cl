@@ -47,7 +47,7 @@ typedef struct {
     real t;        // ray distance of the hit
     mask hit;
     real steps;    // distance evaluations taken
-    real d;        // the distance estimate at t where the lane hit (normals reuse it)
+    real d;        // the distance estimate at t where the lane hit (forward normals reuse it; else 0)
 #if FEATURE_GLOW
     real closest;  // the smallest distance estimate along the ray
 #endif
@@ -228,7 +228,9 @@ march_result march_rays(vec3 origin, vec3 dir, mask active, scalar pixel_angle, 
 #endif
         mask close = (d < hit_threshold(r.t, pixel_angle)) | (d <= 0.0f);
         r.hit = r.hit | (active & close);
+#if FEATURE_FORWARD_NORMALS
         r.d = SELECT(r.d, d, active & close);
+#endif
         active = active & !close;
 #if FEATURE_DITHER
         if (i == first_step)

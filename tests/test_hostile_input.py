@@ -361,7 +361,7 @@ def test_generated_material_names_cannot_be_declared():
     assert np.allclose(grey, grey[0], rtol=0.01)  # the default material: grey, not the file's green
 
 
-@pytest.mark.parametrize("normals", ["tetrahedral", "central"])
+@pytest.mark.parametrize("normals", ["tetrahedral", "central", "forward"])
 def test_normals_stay_finite_deep_inside_a_far_plane(normals):
     """Estimates near float's largest (a point 3e38 inside a plane): the
     normal's differences must not overflow (found by the fuzzer)."""

@@ -482,14 +482,18 @@ def test_a_camera_ray_at_an_area_light_sees_its_radiance(build):
     assert np.all(image.rgba[..., 3][ball | panel] == 0), "lights are not the scene's surfaces: no coverage"
 
 
-MIS_SCENE = f"""
-material floor {{ color: (0.6, 0.6, 0.6), specular: 0 }}
-material ball {{ color: (0.8, 0.5, 0.3), specular: 0 }}
+# a diffuse ball and floor under a sphere and a panel light (also
+# benchmarks/pathtrace_mis.py's diffuse scene)
+DIFFUSE_UNDER_AREA_LIGHTS = """
+material floor { color: (0.6, 0.6, 0.6), specular: 0 }
+material ball { color: (0.8, 0.5, 0.3), specular: 0 }
 scene sphere(0.5).translate((0, 0, 0.5)).material(ball) | plane().material(floor)
-camera {{ position: (0, -3, 2), target: (0, 0, 0.3), fov: 50 }}
-light sphere {{ position: (-0.8, 0.3, 1.6), radius: 0.3, intensity: 3 }}
-light rectangle {{ position: (0.9, 0, 1.4), direction: (-0.3, 0, -1), width: 1, height: 0.6, intensity: 3 }}
-render {{ width: 32, height: 24, integrator: path, bounces: 2, environment: {{ intensity: 0.5 }} }}
+camera { position: (0, -3, 2), target: (0, 0, 0.3), fov: 50 }
+light sphere { position: (-0.8, 0.3, 1.6), radius: 0.3, intensity: 3 }
+light rectangle { position: (0.9, 0, 1.4), direction: (-0.3, 0, -1), width: 1, height: 0.6, intensity: 3 }
+"""
+MIS_SCENE = DIFFUSE_UNDER_AREA_LIGHTS + """\
+render { width: 32, height: 24, integrator: path, bounces: 2, environment: { intensity: 0.5 } }
 """
 
 

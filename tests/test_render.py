@@ -152,6 +152,19 @@ def test_sphere_depth_and_normals(name):
     check_against_analytic(image, t, n, origin, dirs)
 
 
+@pytest.mark.parametrize("name", ["centred", "oblique"])
+def test_forward_normals_reuse_the_marchs_last_estimate(name):
+    """`normals: forward` differences three evaluations against the one the
+    march took at the hit: the normals are as exact as the tetrahedron's
+    (an estimate other than the hit's, such as 0, would tilt them by up to
+    a threshold over the step, the same size)."""
+    camera = SPHERE_CAMERAS[name]
+    image = render_scene("sphere(1)", camera, normals="forward")
+    origin, dirs = primary_rays(camera)
+    t, n = ray_sphere(origin, dirs, (0, 0, 0), 1.0)
+    check_against_analytic(image, t, n, origin, dirs)
+
+
 def test_sphere_off_centre():
     """A translated sphere away from the image centre (the camera looks at the origin)."""
     camera = SPHERE_CAMERAS["oblique"]
