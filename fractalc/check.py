@@ -335,22 +335,8 @@ class _Checker:
     def let_uses(self, name: str) -> list[str]:
         """The lets named in a let's expression, in the order evaluation
         meets them."""
-        found, stack = [], [self.lets[name].value]
-        while stack:
-            e = stack.pop()
-            if isinstance(e, ast.Name):
-                if e.name in self.lets and e.name not in self.params:
-                    found.append(e.name)
-            elif isinstance(e, ast.Vector):
-                stack.extend(reversed(e.items))
-            elif isinstance(e, ast.Unary):
-                stack.append(e.operand)
-            elif isinstance(e, ast.Binary):
-                stack.extend((e.right, e.left))
-            elif isinstance(e, (ast.Call, ast.Method)):
-                receiver = (e.receiver,) if isinstance(e, ast.Method) else ()
-                stack.extend(reversed(receiver + tuple(a.value for a in e.args)))
-        return found
+        return [e.name for e in ast.walk(self.lets[name].value)
+                if isinstance(e, ast.Name) and e.name in self.lets and e.name not in self.params]
 
     # ---- expressions -------------------------------------------------------
 

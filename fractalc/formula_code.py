@@ -137,42 +137,13 @@ _RESERVED = {"stop": "step", "trap": "step", "distance": "final"}
 
 
 def _nested(statement) -> list:
-    found, stack = [], [statement]
-    while stack:
-        s = stack.pop()
-        if isinstance(s, ast.If):
-            for inner in (*s.then, *s.otherwise):
-                found.append(inner)
-                stack.append(inner)
-    return found
+    """The statements inside `statement` (the sides of an `if`, and theirs)."""
+    return [n for n in ast.walk(statement) if n is not statement and isinstance(n, (ast.Assign, ast.If))]
 
 
 def _expressions(statements) -> list:
     """Every expression node of `statements`, ifs' included."""
-    stack = [s for s in statements]
-    found = []
-    while stack:
-        s = stack.pop()
-        if isinstance(s, ast.If):
-            stack.extend((*s.then, *s.otherwise))
-            found.append(s.condition)
-        else:
-            found.append(s.value)
-    out = []
-    while found:
-        e = found.pop()
-        out.append(e)
-        if isinstance(e, ast.Call):
-            found.extend(a.value for a in e.args)
-        elif isinstance(e, ast.Binary):
-            found.extend((e.left, e.right))
-        elif isinstance(e, ast.Unary):
-            found.append(e.operand)
-        elif isinstance(e, ast.Vector):
-            found.extend(e.items)
-        elif isinstance(e, (ast.Field, ast.Method)):
-            found.append(e.receiver)
-    return out
+    return [n for s in statements for n in ast.walk(s) if not isinstance(n, (ast.Assign, ast.If, ast.Arg))]
 
 
 def _names(statements) -> set:
