@@ -18,7 +18,7 @@ import numpy as np
 from . import __version__, pathtrace, program, run
 from .build import build, open_device
 from .denoise import denoise_image, require_denoiser
-from .check import FLOAT_MAX, RENDER_KEYS, check, check_param_values, check_value, in_float_range
+from .check import FLOAT_MAX, RENDER_KEYS, check, check_param_values, check_value, in_float_range, unknown_param
 from .emit import Target, emit, uniform_source
 from .errors import RenderError, SceneError, diagnostic
 from .lanes import CHOICES as LANE_CHOICES
@@ -144,10 +144,8 @@ class Scene:
         changed = dict(self.params)
         for name, value in values.items():
             info = declared.get(name)
-            if info is None:
-                known = ", ".join(declared) or "none"
-                raise SceneError([diagnostic(self.checked.file, self.checked.source, _file_start(),
-                                             f"the scene has no param '{name}' (its params: {known})")])
+            if info is None:     # the caller's mistake, not the file's
+                raise ValueError(unknown_param(name, self.checked))
             try:
                 value = float(value)
             except (TypeError, ValueError):
@@ -344,11 +342,6 @@ class Scene:
             else:
                 metadata[f"render.{f.name}"] = vector(value) if isinstance(value, tuple) else str(value)
         return metadata
-
-
-def _file_start():
-    from .errors import Span
-    return Span(1, 1, 1, 2)
 
 
 def loads(text: str, params: dict | None = None, precision: str | None = None,

@@ -405,8 +405,8 @@ class _Checker:
         thousands of unknown names stays linear."""
         if len(self.errors) >= SUGGESTED_ERRORS:
             return ""
-        close = difflib.get_close_matches(name, itertools.chain(*known), n=1)
-        return f" (did you mean '{close[0]}'?)" if close else ""
+        close = closest_name(name, itertools.chain(*known))
+        return f" (did you mean '{close}'?)" if close else ""
 
     def value_of(self, e: ast.Expr) -> Value:
         """Evaluate an expression that must be a value (not a bare word)."""
@@ -1004,6 +1004,25 @@ def library_formulas() -> tuple[tuple[str, tuple], ...]:
             raise SceneError(checker.errors)
         found.extend(checker.formulas.items())
     return tuple(found)
+
+
+def closest_name(name: str, known) -> str | None:
+    """The name among `known` closest to a misspelt `name`, if one is close."""
+    close = difflib.get_close_matches(name, known, n=1)
+    return close[0] if close else None
+
+
+def unknown_param(name: str, scene: CheckedScene) -> str | None:
+    """What is wrong with setting the param `name` of `scene`: None if the
+    scene declares it, else that it does not, with the closest name or the
+    names it has."""
+    known = [p.name for p in scene.params]
+    if name in known:
+        return None
+    close = closest_name(name, known)
+    hint = f"; did you mean '{close}'?" if close else f" (its params: {', '.join(known)})" if known else \
+        " (it declares none)"
+    return f"the scene has no param '{name}'{hint}"
 
 
 def check(program: ast.Program) -> CheckedScene:

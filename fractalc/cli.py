@@ -124,13 +124,31 @@ def _configure(scene, keys: tuple[dict, dict]) -> None:
         raise UsageError(f"--camera: {error}") from None
 
 
+def _require_params(items: list[str] | None, checked) -> dict[str, float]:
+    """--set's values, each naming a param the scene declares."""
+    from .check import unknown_param
+    params = _parse_set(items)
+    for item in items or ():
+        mistake = unknown_param(item.partition("=")[0].strip(), checked)
+        if mistake:
+            raise UsageError(f"--set {item}: {mistake}")
+    return params
+
+
+def _print_notes(checked) -> None:
+    for note in checked.notes:
+        print(note, file=sys.stderr)
+
+
 def _load(args):
     from .api import loads
     text = _require_file(args.scene)
-    params = _parse_set(getattr(args, "set", None))
+    _parse_set(getattr(args, "set", None))          # its syntax before any work
     keys = _keys_given(args) if hasattr(args, "render") else None
-    scene = loads(text, params=params, precision=getattr(args, "precision", None),
-                  device=getattr(args, "device", None), path=args.scene)
+    scene = loads(text, precision=getattr(args, "precision", None), device=getattr(args, "device", None),
+                  path=args.scene)
+    scene.set_params(_require_params(getattr(args, "set", None), scene.checked))
+    _print_notes(scene.checked)
     if keys:
         _configure(scene, keys)
     return scene
@@ -201,11 +219,48 @@ def command_compile(args) -> int:
     return 0
 
 
+def _count(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def _checked_summary(scene) -> str:
+    """`check`'s line for a scene that checks: its parts, formulas, params,
+    lights and the optional features its kernel will have."""
+    from .emit import features
+    from .lower import lower
+    from .program import Combination, Fractal, Primitive, Transformed, WithMaterial, fold_shape
+    checked = scene.checked
+    kinds: dict[str, int] = {}
+    formulas: list[str] = []
+
+    def parts(shape, _):
+        kind = "fractal" if isinstance(shape, Fractal) or (
+            isinstance(shape, Primitive) and shape.signature.kind == "fractal") else \
+            "shape" if isinstance(shape, Primitive) else \
+            "combination" if isinstance(shape, Combination) else "transform"
+        kinds[kind] = kinds.get(kind, 0) + 1
+        names = [u.formula.name for u in shape.sequence] if isinstance(shape, Fractal) else \
+            [shape.signature.name] if kind == "fractal" else []
+        formulas.extend(name for name in names if name not in formulas)
+        if isinstance(shape, Combination):
+            return tuple((part, None) for part in shape.shapes)
+        return ((shape.shape, None),) if isinstance(shape, (Transformed, WithMaterial)) else ()
+
+    fold_shape(checked.shape, None, parts, lambda *_: None)
+    shown = ", ".join(_count(kinds[k], k) for k in ("shape", "fractal", "combination", "transform") if k in kinds)
+    on = [name.lower().replace("_", " ") for name, enabled in features(lower(checked)).items() if enabled]
+    return "; ".join((
+        f"{scene.checked.file}: ok: {_count(sum(kinds.values()), 'part')} ({shown})",
+        f"formulas: {', '.join(formulas)}" if formulas else "no formulas",
+        f"{_count(len(checked.params), 'param')}" + (f" ({', '.join(p.name for p in checked.params)})"
+                                                      if checked.params else ""),
+        _count(len(checked.lights), "light") if checked.lights else "the headlight",
+        f"kernel features: {', '.join(on) or 'none'}"))
+
+
 def command_check(args) -> int:
     if not args.de:
-        from .check import check
-        from .parse import parse
-        check(parse(_require_file(args.scene), args.scene))
+        print(_checked_summary(_load(args)))
         return 0
     from .overstep import measure
     _require_positive(("--rays", args.rays))
@@ -309,13 +364,18 @@ def command_view(args) -> int:
     _require_positive(("--width", args.width), ("--height", args.height),
                       ("--preview-scale", args.preview_scale), ("--max-samples", args.max_samples),
                       ("--benchmark", args.benchmark))
-    _require_file(args.scene)
+    text = _require_file(args.scene)
     keys = _keys_given(args)
+    if args.set:        # each a param of the file's, before a window opens
+        from .check import check
+        from .parse import parse
+        _require_params(args.set, check(parse(text, args.scene)))
     from .view import Viewer, measure, show
     viewer = Viewer(args.scene, args.width, args.height, params=_parse_set(args.set),
                     precision=args.precision, device=args.device, preview_scale=args.preview_scale,
                     max_samples=args.max_samples, output_dir=args.output_dir)
     _configure(viewer.scene, keys)     # the file's own keys come back when it is edited and reloaded
+    _print_notes(viewer.scene.checked)
     viewer.look_from(viewer.scene.checked.camera)
     if args.benchmark:
         fps = measure(viewer, args.benchmark)
@@ -671,7 +731,8 @@ def main(argv: list[str] | None = None) -> int:
         print(error, file=sys.stderr)
         return 2
     except UsageError as error:
-        parser.print_usage(sys.stderr)
+        # one line: argparse's own syntax errors (an unknown option, a missing
+        # -o) print its usage block; a mistake in a value or a file does not
         print(f"fractalc: error: {error}", file=sys.stderr)
         return 2
     except RenderError as error:

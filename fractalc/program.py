@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from typing import Union
 
 from . import ir
-from .errors import Span
+from .errors import Diagnostic, Span
 from .stdlib import Parameter, Signature
 
 Vector3 = tuple[float, float, float]
@@ -306,3 +306,4 @@ class CheckedScene:
     render: RenderSettings = RenderSettings()
     param_checks: tuple[ParamCheck, ...] = ()
     path: CameraPath | None = None
+    notes: tuple[Diagnostic, ...] = field(default=(), compare=False)   # what check says of a scene it accepts

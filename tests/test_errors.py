@@ -157,6 +157,19 @@ def assert_scene_error(result, prefix):
 def test_check_accepts_a_good_scene(tmp_path):
     result = check(tmp_path, f"scene sphere()\n{CAMERA}\n", name="good.frac")
     assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("good.frac: ok: 1 part (1 shape);")
+
+
+def test_check_says_in_one_line_what_it_checked(tmp_path):
+    """A silent `check` left a user unsure anything ran (issue 21)."""
+    text = ("param power = 8 in [2, 16]\nformula twice() {\n    z = 2 * z + c\n}\n"
+            "scene union(mandelbulb(power), fractal(twice(), bound: 2).translate((3, 0, 0)), plane(offset: -2))\n"
+            f"{CAMERA}\nlight point {{ position: (1, 2, 3) }}\nrender {{ fog: {{ density: 0.1 }} }}\n")
+    result = check(tmp_path, text, name="good.frac")
+    assert result.returncode == 0 and result.stderr == ""
+    assert result.stdout.count("\n") == 1
+    assert result.stdout.startswith("good.frac: ok: 5 parts (1 shape, 2 fractals, 1 combination, 1 transform); "
+                                    "formulas: mandelbulb, twice; 1 param (power); 1 light; kernel features: fog")
 
 
 @pytest.mark.parametrize("name", ["bad.frac", "scenes/bad.frac"])
