@@ -569,7 +569,7 @@ def _parser() -> argparse.ArgumentParser:
     check_.set_defaults(run=command_check)
 
     bench_ = commands.add_parser("bench", help="measure frame times along a camera orbit",
-                                 description="The benchmark of seed 000: render --frames frames along an "
+                                 description="The dissertation plan's benchmark (its section 5.2): render --frames frames along an "
                                              "orbit of the camera about its target; report frame-time "
                                              "statistics, compile time and the machine. With --sweep: "
                                              "render time against error over the quality knobs "

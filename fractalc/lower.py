@@ -430,8 +430,9 @@ def lower(scene: CheckedScene) -> SceneIR:
     distance, surface = lowerer.shape(scene.shape, point, default)
     cut = scene.render.slice
     if cut is not None:
-        # Slicing (seed 002): intersect with the half-space behind the plane;
-        # the cut face is part of the plane, so its normal is the plane's.
+        # Slicing (the blog post "Rendering Julia sets and the Mandelbulb"):
+        # intersect with the half-space behind the plane; the cut face is
+        # part of the plane, so its normal is the plane's.
         length = math.sqrt(sum(c * c for c in cut.normal))
         plane = ir.const(-cut.offset)
         for p, c in zip(point, cut.normal):
