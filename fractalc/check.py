@@ -816,15 +816,29 @@ class _Checker:
         if keys is None:
             self.error(decl.kind_span, f"unknown light kind '{decl.kind}' (known: {', '.join(LIGHT_KEYS)})")
             return None
+        errors_before = len(self.errors)
         found = self.entries(decl.block, keys, "light")
         vector_key = "direction" if decl.kind == "directional" else "position"
-        needed = (vector_key, "direction") if decl.kind in ("spot", "rectangle") else (vector_key,)
-        if any(key not in found for key in needed):
-            for key in needed:
-                if not any(e.key == key for e in decl.block.entries):
-                    self.error(decl.span, f"a {decl.kind} light needs '{key}'")
+        given = {e.key: e for e in decl.block.entries}
+        aimed = "target" in keys         # a spot or rectangle light: `direction` or `target`, as a camera
+        if aimed and "direction" in given and "target" in given:
+            second = max(given["direction"], given["target"], key=lambda e: (e.span.line, e.span.column))
+            self.error(second.key_span, f"a {decl.kind} light takes 'direction' or 'target', not both")
+        needed = (vector_key, "direction") if aimed else (vector_key,)
+        for key in needed:
+            if key not in given and not (key == "direction" and "target" in given):
+                self.error(decl.span, f"a {decl.kind} light needs '{key}'"
+                                      + (" (or 'target', the point it faces)" if key == "direction" else ""))
+        if len(self.errors) > errors_before:
             return None
         vector = found.pop(vector_key)
+        if aimed and "target" in found:
+            target = found.pop("target")
+            found["direction"] = tuple(t - p for t, p in zip(target, vector))
+            if not any(found["direction"]):
+                self.error(given["target"].value.span, f"the {decl.kind} light's target is its position: "
+                                                        f"it faces nowhere")
+                return None
         if decl.kind in ("sphere", "rectangle"):    # the direct renderer's stand-in for their soft shadows
             found.setdefault("shadows", "soft")
         return Light(decl.kind, vector, **found)
@@ -946,11 +960,13 @@ _LIGHT_COMMON = (_P("color", "vec3", None, ">=0"), _P("intensity", "num", None, 
                  _P("shadows", "word:none|hard|soft"), _P("softness", "num", None, ">0"))
 LIGHT_KEYS = {"directional": _keys(_P("direction", "vec3", None, "nonzero"), *_LIGHT_COMMON),
               "point": _keys(_P("position", "vec3"), *_LIGHT_COMMON),
-              "spot": _keys(_P("position", "vec3"), _P("direction", "vec3", None, "nonzero"), *_LIGHT_COMMON,
-                            _P("angle", "num", None, ">0", "<180"), _P("falloff", "num", None, ">=0", "<=180")),
+              "spot": _keys(_P("position", "vec3"), _P("direction", "vec3", None, "nonzero"), _P("target", "vec3"),
+                            *_LIGHT_COMMON, _P("angle", "num", None, ">0", "<180"),
+                            _P("falloff", "num", None, ">=0", "<=180")),
               "sphere": _keys(_P("position", "vec3"), _P("radius", "num", None, ">0"), *_LIGHT_COMMON),
               "rectangle": _keys(_P("position", "vec3"), _P("direction", "vec3", None, "nonzero"),
-                                 _P("width", "num", None, ">0"), _P("height", "num", None, ">0"), *_LIGHT_COMMON)}
+                                 _P("target", "vec3"), _P("width", "num", None, ">0"), _P("height", "num", None, ">0"),
+                                 *_LIGHT_COMMON)}
 BLOCK_KEYS = {
     "block:glow": (_keys(_P("color", "vec3", None, ">=0"), _P("strength", "num", None, ">=0"),
                          _P("radius", "num", None, ">0")), Glow()),

@@ -77,6 +77,11 @@ CASES = [
     case("zero width", "scene sphere()\nrender { width: »0 }"),
     case("fractional max_steps", "scene sphere()\nrender { max_steps: »1.5 }"),
     case("specular", "scene sphere()\nmaterial m { color: (1, 0, 0), specular: »2 }"),
+    case("spot light aimed twice", "scene sphere()\nlight spot { position: (0, 0, 3), direction: (0, 0, -1), "
+                                   "»target: (0, 0, 0) }", "'direction' or 'target', not both"),
+    case("spot light aimed at itself", "scene sphere()\nlight spot { position: (0, 0, 3), target: »(0, 0, 3) }",
+         "target is its position"),
+    case("spot light aimed nowhere", "scene sphere()\n»light spot { position: (0, 0, 3) }", "or 'target'"),
     # ---- duplicates and missing declarations
     case("duplicate camera", f"scene sphere()\n{CAMERA}\n»{CAMERA}"),
     case("duplicate scene", "scene sphere()\n»scene box()"),
@@ -131,6 +136,15 @@ def test_str_shows_each_error_with_its_source_line_and_caret():
 
 def test_param_override_outside_its_range():
     scene_error("param r = 0.7 in [0.1, 2]\nscene sphere(r)", params={"r": 5})
+
+
+@pytest.mark.parametrize("kind, size", [("spot", ""), ("rectangle", ", width: 2")])
+def test_a_spot_or_rectangle_light_faces_its_target(kind, size):
+    """As a camera does: `target` stands for `direction: target - position`."""
+    def light(aim):
+        return fractalc.loads(f"scene sphere()\nlight {kind} {{ position: (1, -2, 3), {aim}{size} }}").checked.lights[0]
+    aimed = light("target: (0.5, 0, 1)")
+    assert aimed == light("direction: (-0.5, 2, -2)") and aimed.direction == (-0.5, 2.0, -2.0)
 
 
 # -------------------------------------------------------------- command line
