@@ -50,9 +50,19 @@ class Unary(Node):
 
 @node
 class Binary(Node):
-    op: str            # + - * / | & and, in formulas, < <= > >= == !=
+    op: str            # + - * / and, in formulas, < <= > >= == != (| and & make a Chain)
     left: "Expr"
     right: "Expr"
+    span: Span
+
+
+@node
+class Chain(Node):
+    """`a | b | c ...` or `a & b & c ...`: operands joined by one operator
+    (both associative), one node however many: a chain of 300 is as deep as
+    `union(...)` of 300."""
+    op: str            # | or &
+    operands: tuple["Expr", ...]
     span: Span
 
 
@@ -90,7 +100,7 @@ class Field(Node):
     span: Span
 
 
-Expr = Union[Number, Name, Vector, Unary, Binary, Call, Method, Field]
+Expr = Union[Number, Name, Vector, Unary, Binary, Chain, Call, Method, Field]
 
 
 @node

@@ -373,6 +373,8 @@ class _Checker:
             return self.arithmetic(e, "neg", [operand])
         if isinstance(e, ast.Binary):
             return self.binary(e)
+        if isinstance(e, ast.Chain):
+            return self.chain(e)
         if isinstance(e, ast.Call):
             return self.call(e)
         if isinstance(e, ast.Method):
@@ -425,19 +427,32 @@ class _Checker:
             self.fail(e.right.span if left.type == SHAPE else e.span,
                       "this is a formula: make it a shape with 'fractal(formula(...), iterations: N)'"
                       if left.type == SHAPE else "a formula's repeat count goes after it: 'formula * count'")
-        if e.op not in "+-*/|&":
+        if e.op not in "+-*/":
             self.fail(e.span, f"'{e.op}' compares numbers in a formula; a scene has no comparisons")
         if left.type == SHAPE and right.type == SHAPE:
-            if e.op == "*" or e.op == "/" or e.op == "+":
+            if e.op != "-":
                 self.fail(e.span, f"'{e.op}' does not combine shapes: use '|' (union), '&' (intersect) or '-' (subtract)")
-            kind = {"|": "union", "&": "intersect", "-": "subtract"}[e.op]
-            return self.shape(Combination(kind, (left.data, right.data), ir.const(0.0), e.span))
+            return self.shape(Combination("subtract", (left.data, right.data), ir.const(0.0), e.span))
         if SHAPE in (left.type, right.type):
             other = right if left.type == SHAPE else left
             self.fail(e.span, f"'{e.op}' needs two shapes or two numbers/vectors, not a shape and {_TYPE_WORDS[other.type]}")
-        if e.op in "|&":
-            self.fail(e.span, f"'{e.op}' combines shapes; these are {_TYPE_WORDS[left.type]} and {_TYPE_WORDS[right.type]}")
-        return self.arithmetic(e, {"+": "+", "-": "-", "*": "*", "/": "/"}[e.op], [left, right])
+        return self.arithmetic(e, e.op, [left, right])
+
+    def chain(self, e: ast.Chain) -> Value:
+        """`a | b | ...` (a union) or `a & b & ...` (an intersection) of shapes:
+        one combination of them all, as union(...) and intersect(...) are."""
+        shapes = []
+        for operand in e.operands:
+            value = self.value_of(operand)
+            if value.type == "error":
+                raise _Failed
+            if value.type != SHAPE:
+                self.fail(operand.span, "this is a formula: make it a shape with 'fractal(formula(...), iterations: N)'"
+                          if value.type == FORMULA else
+                          f"'{e.op}' combines shapes ({'union' if e.op == '|' else 'intersection'}), "
+                          f"this is {_TYPE_WORDS[value.type]}")
+            shapes.append(value.data)
+        return self.shape(Combination("union" if e.op == "|" else "intersect", tuple(shapes), ir.const(0.0), e.span))
 
     def arithmetic(self, e, op: str, operands: list[Value], mode: str = "map") -> Value:
         """Component-wise arithmetic on numbers and vectors; numbers broadcast."""

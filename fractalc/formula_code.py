@@ -234,6 +234,8 @@ class Interpreter:
                 return self.binary(e, left, right)
             except (ValueError, ZeroDivisionError, OverflowError):
                 raise Mistake(e.span, f"'{e.op}' is undefined for these values") from None
+        if isinstance(e, ast.Chain):
+            return self.chain(e, [self.expr(x, env) for x in e.operands])
         if isinstance(e, ast.Field):
             return self.field(e, self.expr(e.receiver, env))
         if isinstance(e, ast.Call):
@@ -267,13 +269,18 @@ class Interpreter:
         # a projection does not lengthen: the bound a dr + b still holds
         return replace(v, type=f"vec{len(items)}", items=items)
 
+    @staticmethod
+    def chain(e: ast.Chain, values: list[Value]) -> Value:
+        """Comparisons joined by '&' (and) or '|' (or), as a balanced tree."""
+        for operand, v in zip(e.operands, values):
+            if v.type != "mask":
+                raise Mistake(operand.span, f"'{e.op}' joins comparisons ('{'and' if e.op == '&' else 'or'}'), "
+                                            f"this is {_word(v)}")
+        joined = ir.pairwise([v.items[0] for v in values], lambda a, b: ir.op("and" if e.op == "&" else "or", a, b))
+        return Value("mask", (joined,), INDEPENDENT if all(v.independent for v in values) else None)
+
     def binary(self, e: ast.Binary, a: Value, b: Value) -> Value:
         op = e.op
-        if op in ("&", "|"):
-            if a.type != "mask" or b.type != "mask":
-                raise Mistake(e.span, f"'{op}' joins comparisons ('and' / 'or'); these are {_word(a)} and {_word(b)}")
-            return Value("mask", (ir.op("and" if op == "&" else "or", a.items[0], b.items[0]),),
-                         INDEPENDENT if a.independent and b.independent else None)
         if "mask" in (a.type, b.type):
             raise Mistake(e.span, f"'{op}' needs numbers or vectors, not a comparison")
         if op in ("<", "<=", ">", ">=", "==", "!="):

@@ -156,14 +156,6 @@ def _operands(s: Combination) -> tuple[Shape, ...]:
     return tuple(found)
 
 
-def _pairwise(items: list, pair) -> object:
-    """Reduce `items` with `pair` as a balanced tree of neighbours (depth
-    log2 n, not n), each pair in its original order."""
-    while len(items) > 1:
-        items = [pair(*items[i:i + 2]) if i + 1 < len(items) else items[i] for i in range(0, len(items), 2)]
-    return items[0]
-
-
 def _nearer(a, b):
     """Union of (distance, surface) pairs: on a tie the first part's surface."""
     (da, sa), (db, sb) = a, b
@@ -248,7 +240,7 @@ class _Lowerer:
     @staticmethod
     def combination(s: Combination, lowered: list):
         if _plain(s):   # min / max: a balanced tree, the same result as folding left
-            return _pairwise(lowered, _nearer if s.kind == "union" else _farther)
+            return ir.pairwise(lowered, _nearer if s.kind == "union" else _farther)
         # smooth ones fold left to right (LANGUAGE.md)
         distance, surface = lowered[0]
         for d, other in lowered[1:]:

@@ -94,6 +94,7 @@ def _span(meta_or_token) -> Span:
 
 
 _EXPRESSIONS = {"vector", "negate", "binary", "call", "method", "field", "named_arg", "positional_arg"}
+_CHAINS = {"union_chain", "intersection_chain"}
 
 
 class _DepthTree(Tree):
@@ -104,16 +105,33 @@ class _DepthTree(Tree):
 
     def __init__(self, data, children, meta=None):
         super().__init__(data, children, meta)
-        # Only expressions and argument lists look at their children: the
-        # helper nodes of `x*` lists grow one child at a time.
-        below = max((c.depth for c in children if isinstance(c, _DepthTree)), default=0) \
-            if data in _EXPRESSIONS or data == "args" else 0
-        self.depth = below + 1 if data in _EXPRESSIONS else below
+        if data in _CHAINS:      # a chain is one level above its deepest operand, however long
+            first, last = children[0], children[2]
+            so_far = first.depth - 1 if isinstance(first, _DepthTree) and first.data == data else _depth(first)
+            self.depth = max(so_far, _depth(last)) + 1
+        else:
+            # Only expressions and argument lists look at their children: the
+            # helper nodes of `x*` lists grow one child at a time.
+            below = max((c.depth for c in children if isinstance(c, _DepthTree)), default=0) \
+                if data in _EXPRESSIONS or data in ("args", "chain") else 0
+            self.depth = below + 1 if data in _EXPRESSIONS else below
         if self.depth > MAX_NESTING:
-            # A binary node is at its operator; others at their first token.
-            where = children[1] if data == "binary" else next(
+            # A binary node or chain is at its operator; others at their first token.
+            where = children[1] if data == "binary" or data in _CHAINS else next(
                 (c for c in children if isinstance(c, Token)), children[0])
             raise _NestingError(where)
+
+
+def _depth(child) -> int:
+    return child.depth if isinstance(child, _DepthTree) else 0
+
+
+class _Operands:
+    """A chain's operator and operands, while Lark reads it."""
+    __slots__ = ("op", "items")
+
+    def __init__(self, op: str, items: list):
+        self.op, self.items = op, items
 
 
 @v_args(meta=True)
@@ -137,6 +155,19 @@ class _ToAst(Transformer_NonRecursive):
     def binary(self, meta, c):
         left, op, right = c
         return ast.Binary(str(op), left, right, _span(meta))
+
+    def union_chain(self, meta, c):
+        """The operands so far (one list, grown in place: linear time)."""
+        operands, op, right = c
+        if not isinstance(operands, _Operands):
+            operands = _Operands(str(op), [operands])
+        operands.items.append(right)
+        return operands
+
+    intersection_chain = union_chain
+
+    def chain(self, meta, c):
+        return ast.Chain(c[0].op, tuple(c[0].items), _span(meta))
 
     def call(self, meta, c):
         args = c[1] or ()
@@ -294,7 +325,8 @@ _FAST_TOKEN = re.compile(r"(?:[ \t\r\f]+|#[^\n]*)*(?:([A-Za-z_][A-Za-z0-9_]*)|((
                          r"|(<=|>=|==|!=|[-+*/|&(){}\[\],:=.<>\n])|(\Z)|(\"[^\"\n]*\")|(.))", re.S)
 _DECL_WORDS = frozenset({"param", "let", "material", "scene", "camera", "light", "render", "path", "formula"})
 _COMPARISONS = frozenset({"<", "<=", ">", ">=", "==", "!="})
-_PRECEDENCE = {"|": 1, "&": 2, **{c: 2.5 for c in _COMPARISONS}, "+": 3, "-": 3, "*": 4, "/": 4}
+# of the operators `arithmetic` reads; `|` and `&` chains are `expr`'s
+_PRECEDENCE = {**{c: 2.5 for c in _COMPARISONS}, "+": 3, "-": 3, "*": 4, "/": 4}
 _STATEMENT_WORDS = frozenset({"init", "final", "if", "else"})     # keywords where a statement starts
 _SEPARATORS = frozenset({",", "\n"})
 # The fast parser hands anything this deep to Lark, which reports the
@@ -543,7 +575,34 @@ class _FastParser:
 
     # expressions
     def expr(self):
-        """Binary operators, left to right by precedence, without recursion."""
+        """A '|' chain of '&' chains of arithmetic (a chain of one operand is
+        that operand), in one frame: a bracket costs the stack two more."""
+        kinds = self.kinds
+        chains = (("&", [], []), ("|", [], []))   # each chain being read: its operands and their depths
+        starts = {}
+        while True:
+            node = self.arithmetic()
+            for op, operands, depths in chains:
+                if not operands and kinds[self.i] != op:
+                    continue                      # no chain of this operator here
+                if not operands:
+                    starts[op] = self.outer
+                operands.append(node)
+                depths.append(self.depth)
+                if kinds[self.i] == op:
+                    break                         # the chain goes on
+                node = ast.Chain(op, tuple(operands), starts[op].to(self.outer))
+                self.depth, self.outer = max(depths) + 1, node.span
+                if self.depth > _FAST_DEPTH:
+                    raise _Stop
+                operands.clear()
+                depths.clear()
+            else:
+                return node
+            self.i += 1
+
+    def arithmetic(self):
+        """Comparisons and + - * /, left to right by precedence, without recursion."""
         node = self.operand()
         kinds, texts = self.kinds, self.texts
         precedence = _PRECEDENCE.get(kinds[self.i])

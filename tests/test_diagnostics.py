@@ -216,10 +216,26 @@ def test_nesting_counts_brackets_and_unary_minus_together():
     assert nesting_column("scene sphere(" + "-(" * 200 + "1" + ")" * 200 + ")") == len("scene sphere(") + 256
 
 
-def test_an_operator_chain_stops_at_the_operator_that_passes_the_limit():
-    # A call is a level too: the 256th '|' holds 257 levels.
-    column = nesting_column("scene " + " | ".join(["sphere()"] * 1000))
-    assert column == len("scene ") + 256 * len("sphere() | ") - 1
+def test_a_chain_of_subtractions_stops_at_the_operator_that_passes_the_limit():
+    # A call is a level too: the 256th '-' holds 257 levels.
+    column = nesting_column("scene " + " - ".join(["sphere()"] * 1000))
+    assert column == len("scene ") + 256 * len("sphere() - ") - 1
+
+
+@pytest.mark.parametrize("op, combine", [("|", "union"), ("&", "intersect")])
+def test_a_chain_of_unions_or_intersections_is_one_level(op, combine):
+    """300 shapes joined by '|' were refused as nesting deeper than 256
+    levels while union(...) of them rendered (issue 21): a chain of one
+    operator is one node, however long, and means the same."""
+    from fractalc import ast
+    from fractalc.lower import lower
+    spheres = [f"sphere(1).translate(({i * 0.01}, 0, 0))" for i in range(300)]
+    chain = parse(f"scene {f' {op} '.join(spheres)}\n")
+    assert isinstance(chain.decls[0].shape, ast.Chain) and len(chain.decls[0].shape.operands) == 300
+    joined = fractalc.loads(f"scene {f' {op} '.join(spheres)}\n{CAMERA}")
+    called = fractalc.loads(f"scene {combine}({', '.join(spheres)})\n{CAMERA}")
+    # the same distance and surface expressions (the IR is interned: equal is identical)
+    assert lower(joined.checked).distance is lower(called.checked).distance
 
 
 def test_a_minus_after_an_operand_is_binary_not_nesting():
@@ -229,7 +245,7 @@ def test_a_minus_after_an_operand_is_binary_not_nesting():
 HOSTILE = {
     "minus signs": "'scene ' + '-' * N + '1'",
     "open brackets": "'scene ' + '(' * N + '1'",
-    "operator chain": "'scene ' + '1|' * (N // 2) + '1'",
+    "operator chain": "'scene ' + '1-' * (N // 2) + '1'",
     "bad lines": "'let = \\n' * (N // 7)",
 }
 
