@@ -5,7 +5,7 @@ from __future__ import annotations
 import gc
 import re
 from array import array
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from itertools import islice
 from sys import intern
@@ -288,8 +288,9 @@ def _expected_words(expected) -> str:
     return ", ".join(words)
 
 
-def _syntax_message(error: UnexpectedInput, before: str = "") -> str:
-    """What went wrong; `before` is the text of the error's line before it."""
+def _syntax_message(error: UnexpectedInput, before: str = "", bracket: str | None = None) -> str:
+    """What went wrong; `before` is the text of the error's line before it,
+    `bracket` the innermost one open there."""
     if isinstance(error, UnexpectedCharacters):
         if error.char == '"':
             return "unterminated string: a string ends with '\"' on the line it starts"
@@ -298,9 +299,11 @@ def _syntax_message(error: UnexpectedInput, before: str = "") -> str:
         return "unexpected end of the file (an unclosed bracket?)"
     assert isinstance(error, UnexpectedToken)
     token, expected = error.token, set(error.expected)
-    if token.type == "NAME" and {"COMMA", "_NL"} & expected and "RBRACE" in expected \
-            and "NUMBER" not in expected:
-        return f"missing ',' or new line before '{token}' (block entries are separated by commas or new lines)"
+    if token.type == "NAME" and {"COMMA", "_NL"} & expected and "NUMBER" not in expected:
+        if bracket == "{" and "RBRACE" in expected:
+            return f"missing ',' or new line before '{token}' (block entries are separated by commas or new lines)"
+        if bracket in ("(", "[") and "COMMA" in expected:
+            return f"missing ',' before '{token}' (arguments and components are separated by commas)"
     if token.type == "$END":
         return f"unexpected end of the file, expected {_expected_words(expected)}"
     if token.type == "STRING":
@@ -775,14 +778,110 @@ def _lark_parse(source: str, text: str, path: str, start: int) -> tuple:
         return _ToAst().transform(_parser().parse(source[start:]))
     except UnexpectedInput as error:
         token = getattr(error, "token", None)
-        if token is not None and token.type == "$END":
+        at_end = isinstance(error, UnexpectedEOF) or (token is not None and token.type == "$END")
+        scan = None
+        if not isinstance(error, UnexpectedCharacters):
+            scan = _scan(source, start, len(source) if at_end else _offset(
+                source, error.line + line_offset, error.column + (column_offset if error.line == 1 else 0)),
+                line_offset, column_offset)
+            unclosed = _unclosed(scan, error, at_end, Span(
+                error.line + line_offset, error.column + (column_offset if error.line == 1 else 0),
+                error.line + line_offset, error.column + (column_offset if error.line == 1 else 0)
+                + len(str(token or " "))) if not at_end else None)
+            if unclosed:
+                raise SceneError([diagnostic(path, text, *unclosed)])
+        bracket = scan.opened[-1].text if scan and scan.opened else None
+        if at_end:
             lines = source_lines(text)
             last = len(lines) - (len(lines) > 1 and lines[-1] == "")   # the line a final break ends
             raise SceneError([diagnostic(path, text, Span(last, len(lines[last - 1]) + 1, last,
                                                           len(lines[last - 1]) + 2), _syntax_message(error))])
         line = source[start:].split("\n")[error.line - 1]
         fail(Span(error.line, error.column, error.line, error.column + len(str(token or " "))),
-             _syntax_message(error, line[:error.column - 1]))
+             _syntax_message(error, line[:error.column - 1], bracket))
     except _NestingError as error:
         where = error.token
         fail(_span(where.meta if isinstance(where, Tree) else where), f"nesting deeper than {MAX_NESTING} levels")
+
+
+_CLOSERS = {"(": ")", "[": "]", "{": "}"}
+_CLOSER_TOKENS = {"(": "RPAR", "[": "RSQB", "{": "RBRACE"}
+
+
+@dataclass(frozen=True)
+class _Read:
+    """A token read before an error: its text and where it starts and ends."""
+    text: str
+    line: int
+    column: int
+    end: int              # the column after it
+
+
+@dataclass(frozen=True)
+class _Scan:
+    """What came before an error: the brackets still open (innermost last),
+    the last token, the first token of the last token's line and the token
+    before that one."""
+    opened: tuple[_Read, ...]
+    last: _Read | None
+    first: _Read | None
+    before: _Read | None
+
+
+def _scan(source: str, start: int, stop: int, line_offset: int, column_offset: int) -> _Scan:
+    """The tokens of `source` from offset `start` (a declaration's start:
+    no bracket open) to offset `stop` (an error's token)."""
+    opened: list[_Read] = []
+    before = last = first = None
+    line, line_start = line_offset + 1, start - column_offset
+    for match in _FAST_TOKEN.finditer(source, start):
+        group = match.lastindex
+        if match.start(group) >= stop or group in (4, 6):
+            break
+        text = match.group(group)
+        if text == "\n":
+            line, line_start = line + 1, match.end()
+            continue
+        read = _Read(text, line, match.start(group) - line_start + 1, match.end(group) - line_start + 1)
+        if last is None or last.line != line:
+            before, first = last, read
+        last = read
+        if text in _CLOSERS:
+            opened.append(read)
+        elif text in ")]}" and opened:
+            opened.pop()
+    return _Scan(tuple(opened), last, first, before)
+
+
+def _unclosed(scan: _Scan, error: UnexpectedInput, at_end: bool, place: Span | None) -> tuple[Span, str] | None:
+    """Where and why, when Lark's error is a bracket left open: just after
+    the last token that should have closed it (or at the error, on the
+    bracket's line) and "unclosed '(' opened at L:C". That is so at the end
+    of the file; where a line after the bracket's starts a declaration
+    (or, inside '(' or '[', a block entry's 'key:'); where the error
+    follows a line break inside '(' or '[' and a closer could come there;
+    and where a declaration's keyword comes inside a bracket."""
+    if not scan.opened:
+        return None
+    bracket, last, first = scan.opened[-1], scan.last, scan.first
+    error_line = place.line if place else 0
+    message = f"unclosed '{bracket.text}' opened at {bracket.line}:{bracket.column}"
+    if at_end:
+        return Span(last.line, last.end, last.line, last.end + 1), f"unexpected end of the file: {message}"
+    token, expected = str(error.token), set(error.expected)
+    closer = _CLOSERS[bracket.text]
+    round_ = bracket.text in "(["                   # newlines inside are space, not separators
+    if first.line > bracket.line and first.line == error_line \
+            and (first.text in _DECL_WORDS or (round_ and token == ":" and last is first)):
+        where, next_text = scan.before, first.text     # a declaration (or a block entry) on a line of its own
+    elif last.line < error_line and round_ and _CLOSER_TOKENS[bracket.text] in expected:
+        where, next_text = last, token
+    elif token in _DECL_WORDS:
+        return place, f"{message}: '{closer}' expected before '{token}'"
+    else:
+        return None
+    if where is None or where.line < bracket.line:
+        return None
+    also = " or ','" if "COMMA" in expected and where is last else ""
+    return Span(where.line, where.end, where.line, where.end + 1), \
+        f"{message}: '{closer}'{also} expected before '{next_text}'"

@@ -195,6 +195,61 @@ def test_a_fifo_is_refused_at_once_not_waited_on(fifo):
     assert result.stderr.strip().endswith("it is a FIFO (named pipe), not a scene file")
 
 
+# ---- 4b. a bracket left open -------------------------------------------------
+
+UNCLOSED = [
+    # (text with » where the error goes, its message)
+    ("scene sphere(1)\ncamera {\n    position: (0, -3.2, 1.0»\n    fov: 40\n}\n",
+     "unclosed '(' opened at 3:15: ')' or ',' expected before 'fov'"),
+    ("scene sphere(1)\ncamera {\n    position: (0, -3.2, 1.0,»\n    fov: 40\n}\n",
+     "unclosed '(' opened at 3:15: ')' expected before 'fov'"),
+    ("scene sphere(1)\ncamera {\n    position: (0, -3.2, 1.0)\n    fov: 40»\nlight point { position: (1, 1, 1) }\n",
+     "unclosed '{' opened at 2:8: '}' expected before 'light'"),
+    ("formula f() {\n    z = 2 * z + c»\nscene fractal(f())\n",
+     "unclosed '{' opened at 1:13: '}' expected before 'scene'"),
+    ("let a = box((1, 2, 3)»\nscene a\n", "unclosed '(' opened at 1:12: ')' or ',' expected before 'scene'"),
+    ("scene union(sphere(1), box(2) »render { width: 64 }\n",
+     "unclosed '(' opened at 1:12: ')' expected before 'render'"),
+    ("scene sphere(1)\ncamera {\n    position: (0, -3.2, 1.0)\n    fov: 40»\n",
+     "unexpected end of the file: unclosed '{' opened at 2:8"),
+]
+
+
+def _marked(text: str) -> tuple[str, int, int]:
+    before, after = text.split("»")
+    return before + after, before.count("\n") + 1, len(before) - before.rfind("\n")
+
+
+@pytest.mark.parametrize("marked, message", UNCLOSED)
+def test_a_bracket_left_open_is_named_with_where_it_opened(marked, message):
+    """A missing ')' or '}' was "missing ',' or new line before 'fov'" on the
+    next line (issue 21): the bracket still open, where it opened, and the
+    caret where its closer is missing."""
+    text, line, column = _marked(marked)
+    with pytest.raises(fractalc.SceneError) as error:
+        parse(text)
+    assert (error.value.line, error.value.column, error.value.message) == (line, column, message)
+
+
+@pytest.mark.parametrize("marked, message", UNCLOSED + [
+    ("scene union(sphere(1), box(1) »box(2))\n", "missing ',' before 'box'"),
+    ("scene sphere(1)\nrender { width: 3 »height: 4 }\n", "missing ',' or new line before 'height'")])
+def test_both_parsers_give_the_same_diagnostics(marked, message):
+    """After valid declarations that the fast parser reads, its error is the
+    one Lark gives reading the whole file (the fast parser hands the rest
+    to Lark from the declaration before)."""
+    from fractalc import parse as parse_module
+    prefix = "let a0 = 1\n" * 50
+    text = prefix + _marked(marked)[0]
+    with pytest.raises(fractalc.SceneError) as fast:
+        parse(text)
+    with pytest.raises(fractalc.SceneError) as lark:
+        parse_module._lark_parse(text, text, "<string>", 0)
+    assert str(fast.value) == str(lark.value)
+    assert fast.value.line == _marked(marked)[1] + 50
+    assert fast.value.message.startswith(message.split(" opened at")[0])
+
+
 # ---- 5. bounded effort ----------------------------------------------------------
 
 def nesting_column(text: str) -> int:

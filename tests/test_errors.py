@@ -40,7 +40,7 @@ def case(name, marked, mentions=None):
 CASES = [
     # ---- syntax
     case("unclosed paren", f"scene union(sphere(1), box(2) »render {{ width: 64 }}"),
-    case("unclosed paren, next line", f"scene sphere(1.5\n»{CAMERA}"),
+    case("unclosed paren, next line", f"scene sphere(1.5»\n{CAMERA}", "unclosed '(' opened at 1:13"),
     case("missing comma in block",
          "scene sphere()\ncamera { position: (0, 0, 5) »target: (0, 0, 0) }"),
     case("missing value", "scene sphere()\nrender { width: »}"),
@@ -189,7 +189,7 @@ def test_check_says_in_one_line_what_it_checked(tmp_path):
 @pytest.mark.parametrize("name", ["bad.frac", "scenes/bad.frac"])
 @pytest.mark.parametrize("marked", [
     "# a comment\nscene union(sphere(), »sphre(1))",
-    "scene sphere(1\n»render { width: 64 }",
+    "scene sphere(1»\nrender { width: 64 }",
 ])
 def test_check_reports_errors_with_the_given_path(tmp_path, marked, name):
     text, [(line, column)] = locate(marked)
