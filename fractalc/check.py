@@ -15,7 +15,7 @@ import os
 from dataclasses import dataclass, replace
 
 from . import ast, formula_code, ir, pathtrace
-from .errors import Diagnostic, SceneError, Span, diagnostic
+from .errors import Diagnostic, SceneError, Severity, Span, diagnostic
 from .program import (DEFAULT_MATERIAL, PROJECTIONS, STEREO_LAYOUTS, Camera, CameraPath, CheckedScene, Coloring,
                       Combination, Environment, Fog, Fractal, Glow, Keyframe, Light, Material, ParamCheck, ParamInfo,
                       Primitive, RenderSettings, Shape, Slice, Transformed, WithMaterial, cosine_palette)
@@ -78,7 +78,11 @@ class _Checker:
         self.colors: dict[tuple, str] = {}
         self.param_checks: list[ParamCheck] = []
         self.shape_sizes: dict[int, tuple[Shape, int]] = {}
-        self.formulas: dict[str, tuple[formula_code.Formula, Signature] | None] = dict(library_formulas() if with_library else ())
+        # the library's formulas, and those a scene can call by name: the library's and the file's own
+        self.library_formulas: dict[str, tuple[formula_code.Formula, Signature]] = \
+            dict(library_formulas() if with_library else ())
+        self.formulas: dict[str, tuple[formula_code.Formula, Signature] | None] = dict(self.library_formulas)
+        self.notes: list[Diagnostic] = []
 
     # ---- diagnostics -------------------------------------------------------
 
@@ -88,6 +92,9 @@ class _Checker:
     def fail(self, span: Span, message: str):
         self.error(span, message)
         raise _Failed
+
+    def note(self, span: Span, message: str) -> None:
+        self.notes.append(diagnostic(self.program.file, self.program.source, span, message, Severity.NOTE))
 
     # ---- declarations ------------------------------------------------------
 
@@ -147,7 +154,7 @@ class _Checker:
             raise SceneError(self.errors)
         scene = CheckedScene(self.program.file, self.program.source, tuple(self.params.values()),
                              self.materials, shape, camera, tuple(l for l in lights if l), render,
-                             tuple(self.param_checks), path)
+                             tuple(self.param_checks), path, tuple(sorted(self.notes, key=lambda d: (d.line, d.column))))
         check_param_values(scene, [p.default for p in scene.params])
         return scene
 
@@ -218,13 +225,27 @@ class _Checker:
             self.error(mistake.span, mistake.message)
             return
         self.formulas[decl.name] = (formula, Signature("formula", decl.name, tuple(parameters)))
+        hidden = self.library_formulas.get(decl.name)
+        if hidden is not None:
+            where = f"{os.path.basename(os.path.dirname(hidden[0].file))}/{os.path.basename(hidden[0].file)}"
+            self.note(decl.name_span, f"'{decl.name}' hides the library formula of that name ({where}:"
+                                      f"{hidden[0].span.line}); the library's is still "
+                                      f"'{LIBRARY}.{decl.name}(...)'")
 
-    def formula_use(self, e: ast.Call) -> Value:
-        known = self.formulas[e.name]
+    def formula_use(self, e: ast.Call | ast.Method, known) -> Value:
+        """A formula with its arguments; `known` is its declaration (None: one that had a mistake)."""
         if known is None:
             raise _Failed              # its declaration had a mistake, already reported
         formula, signature = known
         return Value(FORMULA, (formula_code.Use(formula, self.bound_args(e, signature, e.args)),))
+
+    def library_formula(self, e: ast.Method) -> Value:
+        """`library.NAME(...)`: the library's formula NAME, even where the file's hides it."""
+        known = self.library_formulas.get(e.name)
+        if known is None:
+            self.fail(e.name_span, f"the library has no formula '{e.name}'"
+                                   f"{self.did_you_mean(e.name, self.library_formulas)}")
+        return self.formula_use(e, known)
 
     def hybrid(self, e: ast.Call) -> Value:
         sequence = []
@@ -596,7 +617,7 @@ class _Checker:
     def call(self, e: ast.Call) -> Value:
         name = e.name
         if name in self.formulas:
-            return self.formula_use(e)
+            return self.formula_use(e, self.formulas[name])
         if name == "fractal":
             return self.fractal(e)
         if name == "hybrid":
@@ -674,6 +695,9 @@ class _Checker:
         return Value(NUM, items[0]) if len(items) == 1 else Value(vec_type(len(items)), ir.Vec(items))
 
     def method(self, e: ast.Method) -> Value:
+        if isinstance(e.receiver, ast.Name) and e.receiver.name == LIBRARY and not any(
+                LIBRARY in names for names in (self.params, self.lets, self.material_decls)):
+            return self.library_formula(e)
         receiver = self.value_of(e.receiver)
         if receiver.type == "error":
             raise _Failed
@@ -1017,6 +1041,9 @@ FORMULA_FORMS = {
         _P("julia", "vec3", 0.0), _P("bound", "num", 0.0, ">0"), _P("step", "num", 1.0, ">0", "<=1"))),
     "hybrid": Signature("fractal", "hybrid", ()),
 }
+# `library.NAME(...)` names the library's formula NAME (unless the file
+# declares a value called `library`)
+LIBRARY = "library"
 # The point formulas are tried at when checked
 _PROBE_POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
 

@@ -767,9 +767,11 @@ def _constant(julia, z: Value, point) -> Value:
 
 
 def _unique(sequence) -> list:
+    """The uses of a hybrid, each formula with its arguments once (a file's
+    formula and the library's of the same name are two)."""
     seen, out = set(), []
     for use in sequence:
-        key = (use.formula.name, use.args)
+        key = (use.formula, use.args)
         if key not in seen:
             seen.add(key)
             out.append(use)
@@ -777,7 +779,7 @@ def _unique(sequence) -> list:
 
 
 def _count(sequence, use) -> int:
-    return sum(u.count for u in sequence if (u.formula.name, u.args) == (use.formula.name, use.args))
+    return sum(u.count for u in sequence if (u.formula, u.args) == (use.formula, use.args))
 
 
 def _assignment(formula: Formula, name: str):

@@ -261,6 +261,32 @@ def test_a_files_formula_replaces_the_librarys():
                                rtol=1e-5)
 
 
+def test_a_formula_that_hides_the_librarys_says_so_once_and_the_librarys_is_still_reachable(tmp_path, capsys):
+    """A file's formula replaced the library's of its name silently (issue
+    21): a note names the hidden one, and `library.NAME(...)` still calls it."""
+    from fractalc import cli
+    text = ("formula amazing_box(scale = 3) {\n    z = scale * z + c\n}\n"
+            "scene fractal(hybrid(amazing_box(), amazing_box(2), library.amazing_box(scale: 2)), iterations: 3)\n")
+    checked = fractalc.loads(text, path="t.frac").checked
+    uses = checked.shape.sequence
+    assert [u.formula.file for u in uses[:2]] == ["t.frac"] * 2 and uses[2].formula.file.endswith("formulas.frac")
+    # the library's and the file's, with the same arguments, are two formulas of a hybrid
+    mine = "formula bulb(power = 8) {\n    z = triplex_power(z, power) * 0.5 + c\n}\n"
+    both, twice = (fractalc.loads(f"{mine}scene fractal(hybrid({hybrid}), iterations: 4)").checked.shape
+                   for hybrid in ("bulb(8), library.bulb(8)", "bulb(8) * 2"))
+    assert formula_code.orbit(both.sequence, POINT, both.iterations, both.bailout).distance is not \
+        formula_code.orbit(twice.sequence, POINT, twice.iterations, twice.bailout).distance
+    (note,) = checked.notes
+    assert str(note).startswith("t.frac:1:9: note: 'amazing_box' hides the library formula of that name "
+                                "(stdlib_frac/formulas.frac:")
+    assert "the library's is still 'library.amazing_box(...)'" in note.message
+    (tmp_path / "t.frac").write_text(text)
+    assert cli.main(["check", str(tmp_path / "t.frac")]) == 0
+    assert capsys.readouterr().err.count("note: 'amazing_box' hides") == 1
+    assert "the library has no formula 'amazng_box' (did you mean 'amazing_box'?)" in \
+        _error("scene fractal(library.amazng_box())")
+
+
 def test_an_underivable_step_is_allowed_with_the_formulas_own_estimate():
     text = ("formula cells() {\n    z = (z - floor(z)) * 2 + c\n    final distance = length(z) - 1\n}\n"
             "scene fractal(cells(), iterations: 1)")
