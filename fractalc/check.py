@@ -261,6 +261,18 @@ class _Checker:
             sequence.extend(value.data)
         if not sequence:
             self.fail(e.span, "'hybrid' needs at least one formula")
+        sizes = {}                     # 3 or 4 -> the first formula whose z has that many components
+        for use in sequence:
+            try:
+                size = formula_code.z_size(use, _PROBE_POINT)
+            except formula_code.Mistake:
+                continue               # the formula's own mistake, reported where it is used
+            if size in (3, 4):
+                sizes.setdefault(size, use.formula.name)
+        if len(sizes) > 1:
+            self.fail(e.span, f"a hybrid's formulas must all work on 3-vectors or all on 4-vectors: "
+                              f"'{sizes[4]}' makes z a 4-vector in its 'init', '{sizes[3]}' works on the "
+                              f"point's 3")
         return Value(FORMULA, tuple(sequence))
 
     def repeated(self, e: ast.Binary, formula: Value, count: Value) -> Value:

@@ -563,6 +563,15 @@ def _readonly(use: Use) -> frozenset:
     return frozenset(("c",) + use.formula.params)
 
 
+def z_size(use: Use, point: tuple[ir.Expr, ...]) -> int:
+    """The components of the formula's z: 4 where its own `init` makes it a
+    4-vector (`init z = (z, w)`), else the point's 3."""
+    z = vector(point, (ONE, ZERO), 1.0)
+    out = Interpreter().run(use.formula.init, {"c": _constant(None, z, point), **_environment(use), "z": z},
+                            _readonly(use))
+    return len(out["z"].items)
+
+
 def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.Expr,
           bailout: ir.Expr | None = None, julia: ir.Vec | None = None, trap: bool = False,
           jacobian: bool | None = None, where: Span | None = None) -> Orbit:

@@ -52,6 +52,9 @@ MISTAKES = [
     (DOUBLE + "scene fractal(f(), julia: (1, 2, 3, 4))", "4:7", "'julia' must be a 3-vector like z"),
     ("formula f() {\n    z = z * 2 + c\n    final distance = length(z)\n}\nformula g() {\n    z = z * 3 + c\n}\n"
      "scene fractal(hybrid(f(), g()))", "8:7", "gives its own 'final distance': it cannot be part of a hybrid"),
+    ("formula q() {\n    init z = (z, 0)\n    z = quaternion_square(z) + c\n}\n" + DOUBLE.replace("f()", "g()")
+     + "scene fractal(hybrid(q(), g()), iterations: 8)", "8:15",
+     "a hybrid's formulas must all work on 3-vectors or all on 4-vectors: 'q' makes z a 4-vector"),
     ("formula f() {\n    z = floor(z) * 2 + c\n}\nscene fractal(f())", "2:9",
      "the distance estimate cannot be derived through this"),
     ("formula f() {\n    z = z * 2 + c\n    final distance = z\n}\nscene fractal(f())", "3:22",
