@@ -29,6 +29,11 @@ OVERFLOW_LENGTH = 1e18
 MAX_DERIVATIVE = 1e30
 DEFAULT_BAILOUT = 4.0
 ESTIMATES = ("escape_time_estimate", "linear_estimate")
+# What `final` lines may read of the compiler's derivative (docs/formulas.md):
+# dr, how fast |z| moves with the point (the running derivative; |grad |z||
+# on the Jacobian path), and jacobian_norm, the most z moves when the point
+# moves by one (the Jacobian's spectral norm; |dr| for similarities).
+DERIVED = ("dr", "jacobian_norm")
 VECTOR_TYPES = ("vec2", "vec3", "vec4")
 _WORDS = {"num": "a number", "vec2": "a 2-vector", "vec3": "a 3-vector", "vec4": "a 4-vector",
           "mask": "a comparison"}
@@ -107,10 +112,19 @@ class Formula:
         return tuple(names)
 
     @property
+    def derived(self) -> tuple[str, ...]:
+        """The compiler's derivatives (DERIVED) the final lines read, those
+        the formula does not set itself (its own `init dr = 1`)."""
+        own = _names(self.init + self.step) | {s.name for s in self.final if isinstance(s, ast.Assign)}
+        read = {e.name for e in _expressions(self.final) if isinstance(e, ast.Name)}
+        return tuple(name for name in DERIVED if name in read and name not in own)
+
+    @property
     def own_estimate(self) -> bool:
         """Whether `final distance = ...` gives the estimate without asking
-        for the compiler's."""
-        return any(s.name == "distance" for s in self.final) and not _calls(self.final, ESTIMATES)
+        for the compiler's estimates or derivatives."""
+        return any(s.name == "distance" for s in self.final) and not _calls(self.final, ESTIMATES) \
+            and not self.derived
 
 
 def split(decl: ast.FormulaDecl, file: str = "<string>") -> Formula:
@@ -213,6 +227,9 @@ class Interpreter:
                                       f"{one_sided[e.name].line}: set it on both, or before the 'if'")
             if e.name in FUNCTIONS or e.name in ESTIMATES:
                 raise Mistake(e.span, f"'{e.name}' is a function: call it, e.g. '{e.name}(...)'")
+            if e.name in DERIVED:
+                raise Mistake(e.span, f"'{e.name}' is the compiler's derivative at the orbit's end: only 'final' "
+                                      f"lines read it")
             raise Mistake(e.span, f"unknown name '{e.name}' in formula")
         if isinstance(e, ast.Vector):
             parts = [self.expr(x, env) for x in e.items]
@@ -719,16 +736,27 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
     dr = fields["dr"][0] if use_scalar else None
     traps = (*fields["trap"], *fields["steps"]) if trap else ()
 
-    def derived(name: str, args: list[Value], span: Span) -> Value:
+    last = uses[-1]
+    final_z, final_values, rows = tuple(z_final), finals[-1], None
+    if not use_scalar and not own:
+        # z's Jacobian: the final lines read z and the carried values from the
+        # loop that carries the tangents too, so the iterations run once
+        items = [x for v in final_values.values() for x in v.items]
+        rebuilt, all_rows = _jacobian((*final_z, *items), point, _last_z(last.formula).span)
+        final_z, rows, values = rebuilt[:dims], all_rows[:dims], iter(rebuilt[dims:])
+        final_values = {name: replace(v, items=tuple(next(values) for _ in v.items))
+                        for name, v in final_values.items()}
+
+    def estimate(name: str, args: list[Value], span: Span) -> Value:
         offset = args[0].items[0] if args else ZERO
         if args and (len(args) > 1 or args[0].type != "num"):
             raise Mistake(span, f"'{name}' takes at most one number (the linear estimate's offset)")
-        return number(_estimate(name == "escape_time_estimate", z_final, dr, point, use_scalar, offset, span))
+        return number(_estimate(name == "escape_time_estimate", final_z, rows, dr, offset))
 
-    last = uses[-1]
     if last.formula.final:
-        env = {"c": c, **_environment(last), **finals[-1], "z": Value(z.type, tuple(z_final), None, 1.0)}
-        out = Interpreter(derived).run(last.formula.final, env, _readonly(last))
+        env = {"c": c, **_environment(last), **final_values, "z": Value(z.type, final_z, None, 1.0),
+               **{name: number(_derivative(name, final_z, rows, dr)) for name in last.formula.derived}}
+        out = Interpreter(estimate).run(last.formula.final, env, _readonly(last) | set(last.formula.derived))
         distance = out.get("distance")
         if distance is None:
             raise Mistake(last.formula.final[-1].span, "'final' lines must set 'distance' (the estimate)")
@@ -737,20 +765,35 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
             raise Mistake(assigned.value.span, f"'distance' must be a number, this is {_word(distance)}")
         de = distance.items[0]
     else:
-        de = _estimate(escape, z_final, dr, point, use_scalar, ZERO, _last_z(uses[-1].formula).span)
+        de = _estimate(escape, final_z, rows, dr, ZERO)
     return Orbit(de, traps, use_scalar)
 
 
-def _estimate(escape: bool, z, dr, point, scalar: bool, offset: ir.Expr, where: Span) -> ir.Expr:
-    if not scalar:
-        try:
-            rebuilt, rows = derive.jacobian(z, point)
-        except (ValueError, ZeroDivisionError, OverflowError):
-            # a rule meeting constants outside its domain: 1 / 0 in the derivative of x / 0, of sqrt(0), ...
-            raise Mistake(where, "the derivative of this step is undefined for its constants (a division by "
-                                 "zero, or sqrt, log, asin or acos at the end of their domain)") from None
-        return derive.escape_time_estimate(rebuilt, rows) if escape else \
-            derive.linear_estimate(rebuilt, rows, offset)
+def _jacobian(values, point, where: Span):
+    """derive.jacobian, its failure a Mistake at `where`."""
+    try:
+        return derive.jacobian(values, point)
+    except (ValueError, ZeroDivisionError, OverflowError):
+        # a rule meeting constants outside its domain: 1 / 0 in the derivative of x / 0, of sqrt(0), ...
+        raise Mistake(where, "the derivative of this step is undefined for its constants (a division by "
+                             "zero, or sqrt, log, asin or acos at the end of their domain)") from None
+
+
+def _derivative(name: str, z, rows, dr) -> ir.Expr:
+    """A DERIVED value at the orbit's end: from the scalar running
+    derivative `dr`, or from z's Jacobian `rows` (None on the scalar path)."""
+    if rows is None:
+        return ir.op("abs", dr)        # a similarity's Jacobian is |dr| times a rotation
+    if name == "dr":
+        return derive.finite_estimate(derive.gradient_length(z, rows), ir.length(z))
+    return derive.spectral_norm(rows)
+
+
+def _estimate(escape: bool, z, rows, dr, offset: ir.Expr) -> ir.Expr:
+    """The escape-time or linear estimate, from z's Jacobian `rows` (the
+    Jacobian path) or the scalar running derivative `dr` (rows None)."""
+    if rows is not None:
+        return derive.escape_time_estimate(z, rows) if escape else derive.linear_estimate(z, rows, offset)
     r = ir.length(z)
     if escape:
         estimate = derive.finite_estimate(ir.mul(ir.mul(ir.const(0.5), ir.op("log", r)), r), ir.op("abs", dr))

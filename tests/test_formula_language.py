@@ -55,6 +55,8 @@ MISTAKES = [
     ("formula q() {\n    init z = (z, 0)\n    z = quaternion_square(z) + c\n}\n" + DOUBLE.replace("f()", "g()")
      + "scene fractal(hybrid(q(), g()), iterations: 8)", "8:15",
      "a hybrid's formulas must all work on 3-vectors or all on 4-vectors: 'q' makes z a 4-vector"),
+    ("formula f() {\n    z = z * 2 / dr + c\n}\nscene fractal(f())", "2:17",
+     "'dr' is the compiler's derivative at the orbit's end: only 'final' lines read it"),
     ("formula f() {\n    z = floor(z) * 2 + c\n}\nscene fractal(f())", "2:9",
      "the distance estimate cannot be derived through this"),
     ("formula f() {\n    z = z * 2 + c\n    final distance = z\n}\nscene fractal(f())", "3:22",
@@ -288,6 +290,54 @@ def test_a_formula_that_hides_the_librarys_says_so_once_and_the_librarys_is_stil
     assert capsys.readouterr().err.count("note: 'amazing_box' hides") == 1
     assert "the library has no formula 'amazng_box' (did you mean 'amazing_box'?)" in \
         _error("scene fractal(library.amazng_box())")
+
+
+def _final_estimate(step: str, final: str, iterations: int, points):
+    text = f"formula f() {{\n    {step}\n    final distance = {final}\n}}\nscene fractal(f(), iterations: {iterations})"
+    shape = fractalc.loads(text).checked.shape
+    found = formula_code.orbit(shape.sequence, POINT, shape.iterations, shape.bailout)
+    return ir.evaluate_at((found.distance,), points)[0], found.scalar
+
+
+def test_final_lines_read_the_running_derivative_as_dr():
+    """`final distance = (length(z) - 1) / dr` was "unknown name 'dr'" (issue
+    21). Scalar path: a box fold then 2 z + c, dr = 2^(n+1) - 1; Jacobian
+    path: a stretch S then + c, J_n = I + S + ... + S^n and dr = |J^T z| / |z|."""
+    points = np.random.default_rng(12).uniform(-1.5, 1.5, (64, 3))
+    got, scalar = _final_estimate("z = box_fold(z, 1) * 2 + c", "(length(z) - 1) / dr", 4, points)
+    z = points.copy()
+    for _ in range(4):
+        z = 2 * (np.clip(z, -1, 1) * 2 - z) + points
+    assert scalar
+    np.testing.assert_allclose(got, (np.linalg.norm(z, axis=1) - 1) / (2 ** 5 - 1), rtol=1e-12)
+    stretch = np.array([1.0, 2.0, 1.5])
+    got, scalar = _final_estimate("z = stretch(z, (1, 2, 1.5)) + c", "(length(z) - 1) / dr", 3, points)
+    z, jacobian = points.copy(), np.ones(3)
+    for _ in range(3):
+        z, jacobian = z * stretch + points, jacobian * stretch + 1
+    r = np.linalg.norm(z, axis=1)
+    assert not scalar
+    np.testing.assert_allclose(got, (r - 1) * r / np.linalg.norm(z * jacobian, axis=1), rtol=1e-12)
+
+
+def test_final_lines_read_the_jacobians_spectral_norm_as_jacobian_norm():
+    """A shear then + c: J_n = I + M + ... + M^n, not a similarity; its
+    spectral norm (numpy's largest singular value), and |dr| on the scalar
+    path, where a similarity's Jacobian is dr times a rotation."""
+    points = np.random.default_rng(13).uniform(-1, 1, (64, 3))
+    got, scalar = _final_estimate("z = (z.x + 0.5 * z.y, z.y, 1.2 * z.z - 0.3 * z.x) + c",
+                                  "length(z) / jacobian_norm", 3, points)
+    m = np.array([[1, 0.5, 0], [0, 1, 0], [-0.3, 0, 1.2]])
+    jacobian = sum(np.linalg.matrix_power(m, k) for k in range(4))
+    z = points.copy()
+    for _ in range(3):
+        z = z @ m.T + points
+    assert not scalar
+    np.testing.assert_allclose(got, np.linalg.norm(z, axis=1) / np.linalg.norm(jacobian, 2), rtol=1e-9)
+    got, scalar = _final_estimate("z = box_fold(z, 1) * 2 + c", "length(z) / jacobian_norm", 4, points)
+    assert scalar
+    np.testing.assert_allclose(got, _final_estimate("z = box_fold(z, 1) * 2 + c", "length(z) / dr", 4, points)[0],
+                               rtol=1e-15)
 
 
 def test_an_underivable_step_is_allowed_with_the_formulas_own_estimate():
