@@ -306,17 +306,23 @@ class _Checker:
             if p.name == "julia" and value.type == "vec4":
                 p = replace(p, type="vec4")
             values[p.name] = self.convert(arg.value.span, value, p, "fractal")
+        # the estimate's kind from |z|'s growth at the params' defaults and range ends
+        params = tuple(self.params.values())
+        param_values = tuple(tuple(p.default if value is None else value for p, value in zip(params, chosen))
+                             for chosen in ([None] * len(params), [p.low for p in params], [p.high for p in params]))
         try:
+            growth = formula_code.growth(formula.data, values["julia"], param_values)
             formula_code.orbit(formula.data, _PROBE_POINT, ir.const(2.0), values["bailout"], values["julia"],
-                               where=e.span)
+                               where=e.span, estimate=growth.estimate)
         except formula_code.Mistake as mistake:
             inside = next((u.formula for u in formula.data if u.formula.file != self.program.file), None)
             if inside is None or mistake.span == e.span:
                 self.fail(mistake.span, mistake.message)
             self.fail(e.span, f"{mistake.message} (in the library's '{inside.name}', "
                               f"{inside.file}:{mistake.span.line})")
+        reason = None if formula.data[-1].formula.sets_distance else growth.reason()
         return self.shape(Fractal(formula.data, values["iterations"], values["bailout"], values["julia"],
-                                  values["bound"], values["step"], e.span))
+                                  values["bound"], values["step"], e.span, growth, reason))
 
     def constant_number(self, expr: ast.Expr, what: str) -> float | None:
         value = self.evaluate(expr)

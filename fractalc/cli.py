@@ -225,13 +225,16 @@ def _count(n: int, word: str) -> str:
 
 def _checked_summary(scene) -> str:
     """`check`'s line for a scene that checks: its parts, formulas, params,
-    lights and the optional features its kernel will have."""
+    lights and the optional features its kernel will have (and, printed on
+    stderr, a note at each fractal of the estimate it gets)."""
     from .emit import features
+    from .errors import Severity, diagnostic
     from .lower import lower
     from .program import Combination, Fractal, Primitive, Transformed, WithMaterial, fold_shape
     checked = scene.checked
     kinds: dict[str, int] = {}
     formulas: list[str] = []
+    notes: list = []        # which estimate each fractal's kind chose, and why
 
     def parts(shape, _):
         kind = "fractal" if isinstance(shape, Fractal) or (
@@ -242,11 +245,16 @@ def _checked_summary(scene) -> str:
         names = [u.formula.name for u in shape.sequence] if isinstance(shape, Fractal) else \
             [shape.signature.name] if kind == "fractal" else []
         formulas.extend(name for name in names if name not in formulas)
+        if isinstance(shape, Fractal) and shape.estimate_reason:
+            notes.append(diagnostic(checked.file, checked.source, shape.span,
+                                    f"the fractal gets {shape.estimate_reason}", Severity.NOTE))
         if isinstance(shape, Combination):
             return tuple((part, None) for part in shape.shapes)
         return ((shape.shape, None),) if isinstance(shape, (Transformed, WithMaterial)) else ()
 
     fold_shape(checked.shape, None, parts, lambda *_: None)
+    for note in sorted(notes, key=lambda d: (d.line, d.column)):
+        print(note, file=sys.stderr)
     shown = ", ".join(_count(kinds[k], k) for k in ("shape", "fractal", "combination", "transform") if k in kinds)
     on = [name.lower().replace("_", " ") for name, enabled in features(lower(checked)).items() if enabled]
     return "; ".join((

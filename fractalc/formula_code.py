@@ -14,9 +14,12 @@ differentiated in forward mode (fractalc/derive.py, part VII).
 """
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass, replace
 from typing import Callable
+
+import numpy as np
 
 from . import ast, derive, formulas, ir
 from .errors import Span
@@ -51,7 +54,6 @@ class Value:
     type: str                                   # num | vec2..vec4 | mask
     items: tuple[ir.Expr, ...]
     form: tuple[ir.Expr, ir.Expr] | None = INDEPENDENT
-    degree: float = 0.0                         # its growth with z: 1 for z, 2 for z^2, ...
     underivable: Span | None = None             # an operation on the point without a derivative rule
 
     @property
@@ -67,8 +69,8 @@ def number(x: ir.Expr) -> Value:
     return Value("num", (x,))
 
 
-def vector(items, form=INDEPENDENT, degree=0.0) -> Value:
-    return Value(f"vec{len(items)}", tuple(items), form, degree)
+def vector(items, form=INDEPENDENT) -> Value:
+    return Value(f"vec{len(items)}", tuple(items), form)
 
 
 def _scaled_form(form, s: ir.Expr):
@@ -79,11 +81,11 @@ def _summed_form(f, g):
     return None if f is None or g is None else (ir.add(f[0], g[0]), ir.add(f[1], g[1]))
 
 
-def _dependent_scalar(degree: float, *operands: Value) -> Value:
+def _dependent_scalar(*operands: Value) -> Value:
     """The shared fields of a value computed from `operands` by an
     operation that is not a similarity."""
     independent = all(o.independent for o in operands)
-    return Value("num", (), INDEPENDENT if independent else None, 0.0 if independent else degree,
+    return Value("num", (), INDEPENDENT if independent else None,
                  next((o.underivable for o in operands if o.underivable), None))
 
 
@@ -120,11 +122,16 @@ class Formula:
         return tuple(name for name in DERIVED if name in read and name not in own)
 
     @property
+    def sets_distance(self) -> bool:
+        """Whether the final lines give the estimate (their own, or one of
+        ESTIMATES chosen by name), not the compiler's by its kind."""
+        return any(s.name == "distance" for s in self.final)
+
+    @property
     def own_estimate(self) -> bool:
         """Whether `final distance = ...` gives the estimate without asking
         for the compiler's estimates or derivatives."""
-        return any(s.name == "distance" for s in self.final) and not _calls(self.final, ESTIMATES) \
-            and not self.derived
+        return self.sets_distance and not _calls(self.final, ESTIMATES) and not self.derived
 
 
 def split(decl: ast.FormulaDecl, file: str = "<string>") -> Formula:
@@ -282,7 +289,7 @@ class Interpreter:
                                        f"(components: {', '.join(_COMPONENTS[:len(v.items)])})")
         items = tuple(v.items[_COMPONENTS.index(ch)] for ch in e.name)
         if len(items) == 1:
-            return replace(_dependent_scalar(v.degree, v), items=items)
+            return replace(_dependent_scalar(v), items=items)
         # a projection does not lengthen: the bound a dr + b still holds
         return replace(v, type=f"vec{len(items)}", items=items)
 
@@ -327,19 +334,18 @@ class Interpreter:
                 form = other.form if scalar.independent else None
             else:
                 form = _summed_form(a.form, b.form)
-            return Value(kind, items, form, max(a.degree, b.degree), underivable)
+            return Value(kind, items, form, underivable)
         if op == "/" and any(ir.is_const(x) and x.value == 0.0 for x in b.items):
             raise Mistake(e.span, "division by zero")
         if op == "*" or op == "/":
-            degree = a.degree + b.degree if op == "*" else a.degree - b.degree
             if a.independent and b.independent:
-                return Value(kind, items, INDEPENDENT, 0.0, underivable)
+                return Value(kind, items, INDEPENDENT, underivable)
             scalar, other = (a, b) if a.type == "num" else (b, a) if b.type == "num" else (None, None)
             form = None
             if kind != "num" and scalar is not None and scalar.independent and (op == "*" or scalar is b):
                 size_ = ir.op("abs", scalar.items[0])
                 form = _scaled_form(other.form, size_ if op == "*" else ir.div(ONE, size_))
-            return Value(kind, items, form, degree, underivable)
+            return Value(kind, items, form, underivable)
         raise Mistake(e.span, f"unknown operator '{op}'")
 
 
@@ -353,7 +359,6 @@ def _joined(parts: list[Value]) -> Value:
     elif dependent:
         form = None
     return Value(f"vec{len(items)}" if len(items) > 1 else "num", items, form,
-                 max((v.degree for v in parts), default=0.0),
                  next((v.underivable for v in parts if v.underivable), None))
 
 
@@ -373,7 +378,7 @@ def _chosen(condition: Value, a: list[Value], b: list[Value]) -> list[Value]:
         i += n + 2 * forms
         if forms and all(ir.is_const(f) and f.value == 0.0 for f in form):
             form = INDEPENDENT
-        values.append(Value(x.type, items, form, max(x.degree, y.degree), x.underivable or y.underivable))
+        values.append(Value(x.type, items, form, x.underivable or y.underivable))
     return values
 
 
@@ -415,7 +420,7 @@ class Function:
             raise Mistake(e.span, f"'{e.name}' is undefined for these values") from None
 
 
-def _block(make: Callable, degree: Callable | None = None):
+def _block(make: Callable):
     """A building block of formulas.py as a function: its result keeps z's
     form times the block's factor where the block has one and its other
     arguments do not depend on the point."""
@@ -425,8 +430,7 @@ def _block(make: Callable, degree: Callable | None = None):
         form = _scaled_form(z.form, block.factor) if block.factor is not None and others_independent else None
         if z.independent and others_independent:
             form = INDEPENDENT
-        grown = degree(rest) if degree else z.degree
-        return Value(f"vec{len(block.z)}", tuple(block.z), form, grown,
+        return Value(f"vec{len(block.z)}", tuple(block.z), form,
                      next((v.underivable for v in (z, *rest) if v.underivable), None))
     return compute
 
@@ -438,12 +442,7 @@ def _box_fold(span: Span, z: Value, limit: Value) -> Value:
     return _block(formulas.box_fold)(span, z, limit)
 
 
-def _power_degree(rest):
-    power = rest[0].items[0]
-    return power.value if ir.is_const(power) else math.inf
-
-
-def _map(name: str, degree: Callable[[list[float]], float], derivable: bool = True):
+def _map(name: str, derivable: bool = True):
     """A function of numbers applied per component (numbers broadcast)."""
     def compute(span: Span, *values: Value):
         size = max(len(v.items) for v in values)
@@ -459,7 +458,7 @@ def _map(name: str, degree: Callable[[list[float]], float], derivable: bool = Tr
         if name == "abs" and size > 1 and values[0].form is not None:
             form = values[0].form              # the octant fold: lengths kept
         kind = "num" if size == 1 else f"vec{size}"
-        return Value(kind, items, form, 0.0 if independent else degree([v.degree for v in values]), underivable)
+        return Value(kind, items, form, underivable)
     return compute
 
 
@@ -472,14 +471,14 @@ def _select(span: Span, condition: Value, a: Value, b: Value) -> Value:
     if forms and all(ir.is_const(x) and x.value == 0.0 for x in form):
         form = INDEPENDENT
     return Value(a.type, tuple(ir.op("select", condition.items[0], x, y) for x, y in zip(a.items, b.items)), form,
-                 max(a.degree, b.degree), a.underivable or b.underivable)
+                 a.underivable or b.underivable)
 
 
 def _vector_fn(function: Callable, result: str):
     def compute(span: Span, *values: Value):
         items = function(*(v.items for v in values))
         items = items if isinstance(items, tuple) else (items,)
-        return replace(_dependent_scalar(max(v.degree for v in values) * (2 if function is ir.dot else 1), *values),
+        return replace(_dependent_scalar(*values),
                        type=result if result != "same" else values[0].type, items=items)
     return compute
 
@@ -502,14 +501,7 @@ def _quaternion_multiply(span: Span, a: Value, b: Value) -> Value:
     elif a.independent or b.independent:          # times a constant quaternion: a scale and a rotation
         fixed, moving = (a, b) if a.independent else (b, a)
         form = _scaled_form(moving.form, ir.length(fixed.items))
-    return Value("vec4", items, form, a.degree + b.degree, a.underivable or b.underivable)
-
-
-def _growth(name):
-    """How a function of numbers grows with z: like its arguments (piecewise-linear ones), half as fast
-    (sqrt) or faster than any power (the transcendental ones)."""
-    return lambda d: max(d) if name in ("abs", "min", "max", "clamp", "mix") else \
-        (max(d) / 2 if name == "sqrt" else math.inf)
+    return Value("vec4", items, form, a.underivable or b.underivable)
 
 
 FUNCTIONS: dict[str, Function] = {
@@ -526,22 +518,20 @@ FUNCTIONS: dict[str, Function] = {
     "scale": Function(("v", "n", "v?"), _block(formulas.scale), "scale(z, factor, centre)"),
     "stretch": Function(("v", "v"), _block(formulas.stretch), "stretch(z, factors)"),
     "translate": Function(("v", "v"), _block(formulas.translate), "translate(z, offset)"),
-    "triplex_power": Function(("3", "n"), _block(formulas.triplex_power, degree=_power_degree),
-                              "triplex_power(z, power)"),
-    "quaternion_square": Function(("4",), _block(formulas.quaternion_square, degree=lambda rest: 2.0),
-                                  "quaternion_square(q)"),
+    "triplex_power": Function(("3", "n"), _block(formulas.triplex_power), "triplex_power(z, power)"),
+    "quaternion_square": Function(("4",), _block(formulas.quaternion_square), "quaternion_square(q)"),
     "quaternion_multiply": Function(("4", "4"), _quaternion_multiply, "quaternion_multiply(a, b)"),
     # math
-    **{name: Function(("any",), _map(name, _growth(name)), f"{name}(x)")
+    **{name: Function(("any",), _map(name), f"{name}(x)")
        for name in ("sin", "cos", "tan", "asin", "acos", "atan", "sqrt", "rsqrt", "abs", "exp", "log", "radians",
                     "degrees")},
-    **{name: Function(("any",), _map(name, lambda d: 0.0, derivable=False), f"{name}(x)") for name in ("floor", "round")},
-    "atan2": Function(("any", "any"), _map("atan2", _growth("atan2")), "atan2(y, x)"),
-    "min": Function(("any", "any"), _map("min", _growth("min")), "min(a, b)"),
-    "max": Function(("any", "any"), _map("max", _growth("max")), "max(a, b)"),
-    "pow": Function(("any", "any"), _map("pow", lambda d: math.inf), "pow(x, y)"),
-    "clamp": Function(("any", "any", "any"), _map("clamp", _growth("clamp")), "clamp(x, low, high)"),
-    "mix": Function(("any", "any", "any"), _map("mix", _growth("mix")), "mix(a, b, t)"),
+    **{name: Function(("any",), _map(name, derivable=False), f"{name}(x)") for name in ("floor", "round")},
+    "atan2": Function(("any", "any"), _map("atan2"), "atan2(y, x)"),
+    "min": Function(("any", "any"), _map("min"), "min(a, b)"),
+    "max": Function(("any", "any"), _map("max"), "max(a, b)"),
+    "pow": Function(("any", "any"), _map("pow"), "pow(x, y)"),
+    "clamp": Function(("any", "any", "any"), _map("clamp"), "clamp(x, low, high)"),
+    "mix": Function(("any", "any", "any"), _map("mix"), "mix(a, b, t)"),
     "select": Function(("m", "any", "any"), _select, "select(condition, if_true, if_false)"),
     "length": Function(("v",), _vector_fn(ir.length, "num"), "length(v)"),
     "dot": Function(("v", "v"), _vector_fn(ir.dot, "num"), "dot(a, b)"),
@@ -580,10 +570,84 @@ def _readonly(use: Use) -> frozenset:
     return frozenset(("c",) + use.formula.params)
 
 
+# ---- the estimate's kind: |z|'s growth, measured --------------------------------
+
+class Estimate(enum.Enum):
+    LINEAR = "linear"               # (r - offset) / |dr|: folds, IFS, boxes
+    ESCAPE_TIME = "escape-time"     # 0.5 r ln r / |dr|: z grows faster than linearly (powers)
+
+
+# A step's growth is the exponent k of |F(z)| ~ |z|^k far out, from |z| at
+# these radii (c near the origin), the median over seeded directions; above
+# ESCAPE_GROWTH the escape-time estimate (z^2 + c grows as 2, a fold or an
+# IFS step as 1, Kaliset's abs(z) / |z|^2 + c as 0).
+GROWTH_RADII = (1e2, 1e4)
+ESCAPE_GROWTH = 1.5
+_GROWTH_DIRECTIONS = 32
+_NEAR = (0.1, -0.2, 0.3)            # c while measuring (Mandelbrot mode): a point near the origin
+_POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
+
+
+@dataclass(frozen=True)
+class Growth:
+    """How fast a fractal's |z| grows per step far out, as measured: the
+    largest exponent among its formulas, whose it is, and so its estimate."""
+    exponent: float
+    formula: str
+
+    @property
+    def estimate(self) -> Estimate:
+        return Estimate.ESCAPE_TIME if self.exponent > ESCAPE_GROWTH else Estimate.LINEAR
+
+    def reason(self) -> str:
+        """Which estimate, and why, in words."""
+        grows = "faster than any power" if math.isinf(self.exponent) else f"as |z|^{self.exponent:.2f}"
+        low, high = (f"{r:g}" for r in GROWTH_RADII)
+        escape = self.estimate is Estimate.ESCAPE_TIME
+        return (f"{'the escape-time estimate 0.5 r ln r / dr' if escape else 'the linear estimate r / dr'}: a step "
+                f"of '{self.formula}' grows |z| {grows} far out (measured from |z| = {low} to {high}), "
+                f"{'' if escape else 'no '}faster than |z|^{ESCAPE_GROWTH:g}")
+
+
+def growth(sequence: tuple[Use, ...], julia: ir.Vec | None = None,
+           param_values: tuple[tuple[float, ...], ...] = ((),)) -> Growth:
+    """Measure how each formula of `sequence` grows |z| far out (for each
+    set of the scene's param values given: the largest); the estimate's
+    kind follows from it, whatever the steps' spelling."""
+    directions = np.random.default_rng(0).normal(size=(_GROWTH_DIRECTIONS, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    points = np.concatenate([GROWTH_RADII[0] * directions, GROWTH_RADII[1] * directions])
+    found = []
+    for use in _unique(sequence):
+        far = _far_step_length(use, julia)
+        exponent = 0.0
+        for values in param_values:
+            near_length, far_length = np.split(ir.evaluate_at((far,), points, values)[0], 2)
+            with np.errstate(all="ignore"):
+                k = np.log(far_length / near_length) / math.log(GROWTH_RADII[1] / GROWTH_RADII[0])
+            k = np.where(np.isfinite(far_length), np.nan_to_num(k, nan=0.0), math.inf)
+            exponent = max(exponent, float(np.median(k)))
+        found.append(Growth(exponent, use.formula.name))
+    return max(found, key=lambda g: g.exponent)
+
+
+def _far_step_length(use: Use, julia: ir.Vec | None) -> ir.Expr:
+    """|z| after one step of the formula from z = the point (taken far
+    out), with c near the origin (or the Julia constant)."""
+    near = vector(tuple(ir.const(x) for x in _NEAR))
+    start = Interpreter().run(use.formula.init, {"c": near, **_environment(use), "z": near}, _readonly(use))
+    extra = (ZERO,) * (len(start["z"].items) - 3)
+    fits = julia is not None and len(julia.items) == len(start["z"].items)     # else orbit's mistake
+    env = {"c": vector(julia.items) if fits else vector((*near.items, *extra)),
+           **_environment(use), **{name: start[name] for name in use.formula.carried if name != "z"},
+           "z": vector((*_POINT, *extra), (ONE, ZERO))}
+    return ir.length(Interpreter().run(use.formula.step, env, _readonly(use))["z"].items)
+
+
 def z_size(use: Use, point: tuple[ir.Expr, ...]) -> int:
     """The components of the formula's z: 4 where its own `init` makes it a
     4-vector (`init z = (z, w)`), else the point's 3."""
-    z = vector(point, (ONE, ZERO), 1.0)
+    z = vector(point, (ONE, ZERO))
     out = Interpreter().run(use.formula.init, {"c": _constant(None, z, point), **_environment(use), "z": z},
                             _readonly(use))
     return len(out["z"].items)
@@ -591,18 +655,19 @@ def z_size(use: Use, point: tuple[ir.Expr, ...]) -> int:
 
 def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.Expr,
           bailout: ir.Expr | None = None, julia: ir.Vec | None = None, trap: bool = False,
-          jacobian: bool | None = None, where: Span | None = None) -> Orbit:
+          jacobian: bool | None = None, where: Span | None = None, estimate: Estimate | None = None) -> Orbit:
     """The estimate of the fractal of a formula, or a hybrid of several
     applied in turn (`count` steps each), `iterations` steps in all; a ray
     stops once |z| > bailout or a step would take z beyond OVERFLOW_LENGTH.
-    Without a bailout, escape-time formulas take DEFAULT_BAILOUT and the
-    others none. Raises Mistake (at `where`, the use, for the use's own
-    mistakes)."""
+    `estimate` is its kind (None: measured now, `growth`, for formulas
+    whose arguments are constants); without a bailout, escape-time
+    formulas take DEFAULT_BAILOUT and the others none. Raises Mistake (at
+    `where`, the use, for the use's own mistakes)."""
     interpreter = Interpreter()
     uses = _unique(sequence)
 
     # init: each formula's carried values, in order; z starts as the point
-    z = vector(point, (ONE, ZERO), 1.0)
+    z = vector(point, (ONE, ZERO))
     carried: list[dict[str, Value]] = []
     for use in uses:
         env = {"c": _constant(julia, z, point), **_environment(use), "z": z}
@@ -647,7 +712,9 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
                                                  "'final distance = ...'")
     conformal = all(v.form is not None for v in z_forms) and not own
     use_scalar = conformal if jacobian is None else (not jacobian and conformal)
-    escape = any(v.degree > 1.5 for v in z_forms)
+    if estimate is None:
+        estimate = growth(sequence, julia).estimate
+    escape = estimate is Estimate.ESCAPE_TIME
     if bailout is None and escape:
         bailout = ir.const(DEFAULT_BAILOUT)
 
@@ -683,7 +750,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
 
     def round_(state):
         fields = unpack(state)
-        z_now = Value(z.type, fields["z"], (ONE, ZERO), 1.0)
+        z_now = Value(z.type, fields["z"], (ONE, ZERO))
         stopped = fields["stopped"][0] if stoppable else None
         for j, (k, use) in enumerate(steps):
             # with one step per iteration the loop's condition stops the ray
@@ -710,7 +777,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
                 stopped = ir.op("or", stopped, ir.op("and", going, ir.op("not", ok)))
             if "stop" in out:               # `stop = condition`: these rays iterate no more
                 stopped = ir.op("or", stopped, ir.op("and", ok, out["stop"].items[0]))
-            z_now = Value(z.type, fields["z"], (ONE, ZERO), 1.0)
+            z_now = Value(z.type, fields["z"], (ONE, ZERO))
         if stoppable:
             fields["stopped"] = (stopped,)
         if period > 1:
@@ -754,7 +821,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
         return number(_estimate(name == "escape_time_estimate", final_z, rows, dr, offset))
 
     if last.formula.final:
-        env = {"c": c, **_environment(last), **final_values, "z": Value(z.type, final_z, None, 1.0),
+        env = {"c": c, **_environment(last), **final_values, "z": Value(z.type, final_z, None),
                **{name: number(_derivative(name, final_z, rows, dr)) for name in last.formula.derived}}
         out = Interpreter(estimate).run(last.formula.final, env, _readonly(last) | set(last.formula.derived))
         distance = out.get("distance")
@@ -815,7 +882,7 @@ def _constant(julia, z: Value, point) -> Value:
     if julia is not None:
         return vector(julia.items)
     extra = (ZERO,) * (len(z.items) - 3)
-    return vector((*point, *extra), (ZERO, ONE), 1.0)
+    return vector((*point, *extra), (ZERO, ONE))
 
 
 def _unique(sequence) -> list:
@@ -852,7 +919,7 @@ def _step_values(interpreter, uses, carried, dependent, z: Value, c: Value) -> l
     """Each formula's values after one step from symbolic state, for
     their forms (which values depend on the point)."""
     results = []
-    probe_z = Value(z.type, tuple(ir.Var(f"z.{i}", ir.REAL) for i in range(len(z.items))), (ONE, ZERO), 1.0)
+    probe_z = Value(z.type, tuple(ir.Var(f"z.{i}", ir.REAL) for i in range(len(z.items))), (ONE, ZERO))
     for k, use in enumerate(uses):
         env = {"c": c, **_environment(use), "z": probe_z}
         for name, v in carried[k].items():

@@ -31,7 +31,10 @@ def _formula(name: str, point: Vector, args: tuple, iterations: ir.Expr, bailout
              trap: bool) -> Orbit:
     """The library formula NAME_formula as this fractal."""
     formula = dict(library_formulas())[f"{name}_formula"][0]
-    found = formula_code.orbit((formula_code.Use(formula, args),), point, iterations, bailout, trap=trap)
+    # each gives its own estimate and its bailout (the box and the solids none): the kind, which only
+    # chooses a default bailout here, is linear
+    found = formula_code.orbit((formula_code.Use(formula, args),), point, iterations, bailout, trap=trap,
+                               estimate=formula_code.Estimate.LINEAR)
     return Orbit(found.distance, found.trap)
 
 

@@ -223,7 +223,8 @@ class _Lowerer:
 
     @staticmethod
     def fractal(s: Fractal, point: Point) -> ir.Expr:
-        distance = ir.mul(formula_code.orbit(s.sequence, point, s.iterations, s.bailout, s.julia).distance, s.step)
+        distance = ir.mul(formula_code.orbit(s.sequence, point, s.iterations, s.bailout, s.julia,
+                                             estimate=s.growth.estimate).distance, s.step)
         if s.bound is None:
             return distance
         bound = ir.call("sd_sphere", (ir.Vec(point), s.bound))
@@ -235,7 +236,8 @@ class _Lowerer:
         if coloring is None:
             return surface
         return _trap_colored(surface, coloring, formula_code.orbit(s.sequence, point, s.iterations, s.bailout,
-                                                                   s.julia, trap=True).trap, point)
+                                                                   s.julia, trap=True,
+                                                                   estimate=s.growth.estimate).trap, point)
 
     @staticmethod
     def combination(s: Combination, lowered: list):

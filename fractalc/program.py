@@ -91,6 +91,8 @@ class Fractal:
     bound: ir.Expr | None                 # a radius holding the fractal (None: not known)
     step: ir.Expr                         # the estimate's factor: check --de's safe step factor
     span: Span
+    growth: object = None                 # formula_code.Growth: |z|'s growth measured, the estimate's kind
+    estimate_reason: str | None = None    # which estimate the kind chose and why (None: the formula's final lines)
 
 
 Shape = Union[Primitive, Combination, Transformed, WithMaterial, Fractal]

@@ -180,7 +180,7 @@ def test_check_says_in_one_line_what_it_checked(tmp_path):
             "scene union(mandelbulb(power), fractal(twice(), bound: 2).translate((3, 0, 0)), plane(offset: -2))\n"
             f"{CAMERA}\nlight point {{ position: (1, 2, 3) }}\nrender {{ fog: {{ density: 0.1 }} }}\n")
     result = check(tmp_path, text, name="good.frac")
-    assert result.returncode == 0 and result.stderr == ""
+    assert result.returncode == 0 and result.stderr.startswith("good.frac:5:32: note: the fractal gets the linear")
     assert result.stdout.count("\n") == 1
     assert result.stdout.startswith("good.frac: ok: 5 parts (1 shape, 2 fractals, 1 combination, 1 transform); "
                                     "formulas: mandelbulb, twice; 1 param (power); 1 light; kernel features: fog")

@@ -340,6 +340,46 @@ def test_final_lines_read_the_jacobians_spectral_norm_as_jacobian_norm():
                                rtol=1e-15)
 
 
+# The issue's two pairs (issue 21): one map, two spellings each.
+ROTATED_FOLD = {
+    "by hand": "    a = radians(40 * z.z)\n    z = (cos(a) * z.x - sin(a) * z.y, sin(a) * z.x + cos(a) * z.y, z.z)\n"
+               "    z = clamp(z, -1, 1) * 2 - z\n    z = 2 * z + c\n",
+    "blocks": "    z = rotate(z, (0, 0, 1), 40 * z.z)\n    z = box_fold(z, 1)\n    z = 2 * z + c\n",
+}
+SQUARED = {"scaled": "    z = scale(z, length(z)) + c\n", "multiplied": "    z = z * length(z) + c\n"}
+ROTATED_FOLD_USE = "iterations: 6, bailout: 100, julia: (0.3, -0.2, 0.1), bound: 12"
+SQUARED_USE = "iterations: 8, bound: 2"
+
+
+def pair_scene(body: str, use: str) -> str:
+    return f"formula f() {{\n{body}}}\nscene fractal(f(), {use})\n"
+
+
+@pytest.mark.parametrize("spellings, use, estimate", [
+    (ROTATED_FOLD, ROTATED_FOLD_USE, formula_code.Estimate.LINEAR),
+    (SQUARED, SQUARED_USE, formula_code.Estimate.ESCAPE_TIME)], ids=["rotated fold", "squared"])
+def test_the_estimates_kind_is_the_maps_growth_whatever_its_spelling(spellings, use, estimate):
+    """A hand-written rotation and clamp fold got the escape-time estimate,
+    `scale(z, length(z))` the linear one (issue 21): the kind is measured
+    from how |z| grows, so each spelling gets the same, right kind, the
+    same estimate, and a note that says why."""
+    points = np.random.default_rng(14).uniform(-3, 3, (200, 3))
+    found = []
+    for body in spellings.values():
+        shape = fractalc.loads(pair_scene(body, use)).checked.shape
+        assert shape.growth.estimate is estimate
+        assert shape.estimate_reason.startswith(f"the {estimate.value} estimate")
+        orbit = formula_code.orbit(shape.sequence, POINT, shape.iterations, shape.bailout, shape.julia,
+                                   estimate=shape.growth.estimate)
+        found.append(ir.evaluate_at((orbit.distance,), points)[0])
+    np.testing.assert_allclose(found[0], found[1], rtol=1e-9, atol=1e-12)
+
+
+def test_a_formula_that_gives_its_own_estimate_gets_no_note_of_the_kind():
+    text = "formula f() {\n    z = z * length(z) + c\n    final distance = linear_estimate()\n}\nscene fractal(f())"
+    assert fractalc.loads(text).checked.shape.estimate_reason is None
+
+
 def test_an_underivable_step_is_allowed_with_the_formulas_own_estimate():
     text = ("formula cells() {\n    z = (z - floor(z)) * 2 + c\n    final distance = length(z) - 1\n}\n"
             "scene fractal(cells(), iterations: 1)")

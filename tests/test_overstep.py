@@ -86,3 +86,20 @@ def test_a_thin_set_needs_a_higher_surface_level(tmp_path, capsys):
     assert cli.main(["check", "--de", "--rays", "40", "--surface", "1e-2", path]) == 0
     assert "rays met the surface" in capsys.readouterr().out
     assert cli.main(["check", "--de", "--surface", "0", path]) == 2
+
+
+def test_each_spelling_of_a_map_oversteps_alike():
+    """The issue's pairs (issue 21), measured: spelt by hand, the rotated
+    fold oversteps as the library's blocks do (it measured 15.5 with the
+    escape-time estimate it got), and `scale(z, length(z)) + c`, which got
+    the linear estimate and met no surface, never oversteps, as
+    `z * length(z) + c` does."""
+    from test_formula_language import ROTATED_FOLD, ROTATED_FOLD_USE, SQUARED, SQUARED_USE, pair_scene
+    rotated = [overstep.measure(fractalc.loads(pair_scene(body, ROTATED_FOLD_USE)), rays=100, surface=1e-3)
+               for body in ROTATED_FOLD.values()]
+    assert rotated[0].rays == rotated[1].rays > 50
+    assert abs(rotated[0].largest_ratio - rotated[1].largest_ratio) < 1e-3 * rotated[1].largest_ratio
+    squared = [overstep.measure(fractalc.loads(pair_scene(body, SQUARED_USE)), rays=100) for body in SQUARED.values()]
+    assert squared[0].rays == squared[1].rays > 5
+    assert squared[0].largest_ratio == pytest.approx(squared[1].largest_ratio, rel=1e-3)
+    assert squared[0].largest_ratio < 1.0
