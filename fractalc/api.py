@@ -261,6 +261,16 @@ class Scene:
         return run.distances(program, self.device, points, self._param_values(),
                              target.lanes, target.double)
 
+    def escape_time_set(self, points) -> np.ndarray:
+        """At (N, 3) points, the scene with each fractal that has a bailout
+        replaced by its escape-time set: -1 where the orbit stays within the
+        bailout for all the iterations (what the formula means), 1 where it
+        escapes; other shapes give their distances. `check --de` marches it
+        to measure the estimate against the set."""
+        target = self._target(self.checked.render)
+        program = build(emit(lower(self.checked, escape_time_sets=True), target), self.device)
+        return run.distances(program, self.device, points, self._param_values(), target.lanes, target.double)
+
     def mesh(self, resolution: int = 256, bounds=None, progress: bool = False):
         """The surface as a watertight triangle mesh (fractalc.mesh.Mesh:
         vertices, faces, normals; `.save(path)`), sampled on a grid of

@@ -270,16 +270,18 @@ def command_check(args) -> int:
     if not args.de:
         print(_checked_summary(_load(args)))
         return 0
-    from .overstep import measure
+    from .overstep import Against, has_escape_time_set, measure
     _require_positive(("--rays", args.rays))
     if not 0 < args.surface < 1:
         raise UsageError("--surface must be between 0 and 1 (bound radii)")
     scene = _load(args)
-    try:
-        result = measure(scene, rays=args.rays, seed=args.seed, surface=args.surface)
-    except ValueError as error:
-        raise UsageError(f"--de: {error}") from None
-    print(f"{args.scene}: {result.report()}")
+    # against the estimate's own surface, then (fractals with a bailout) the escape-time set
+    for against in (Against.ESTIMATE, Against.ESCAPE_TIME_SET)[:1 + has_escape_time_set(scene)]:
+        try:
+            result = measure(scene, rays=args.rays, seed=args.seed, surface=args.surface, against=against)
+        except ValueError as error:
+            raise UsageError(f"--de: {error}") from None
+        print(f"{args.scene}: {result.report()}", flush=True)
     return 0
 
 

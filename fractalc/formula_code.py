@@ -556,6 +556,9 @@ class Orbit:
     distance: ir.Expr
     trap: tuple[ir.Expr, ...]       # origin, |x|, |y|, |z|, the steps taken (empty unless asked for)
     scalar: bool                    # the estimate from a scalar running derivative (else the Jacobian or own)
+    # -1 where the orbit stays within the bailout for all its iterations (the
+    # escape-time set: what the formula means), 1 where it escapes; None without a bailout
+    inside: ir.Expr | None = None
 
 
 def _arg_value(arg) -> Value:
@@ -833,7 +836,8 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
         de = distance.items[0]
     else:
         de = _estimate(escape, final_z, rows, dr, ZERO)
-    return Orbit(de, traps, use_scalar)
+    inside = None if bailout is None else ir.op("select", _inside(z_final, bailout), ir.const(-1.0), ONE)
+    return Orbit(de, traps, use_scalar, inside)
 
 
 def _jacobian(values, point, where: Span):

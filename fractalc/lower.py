@@ -168,9 +168,10 @@ def _farther(a, b):
 
 
 class _Lowerer:
-    def __init__(self, scene: CheckedScene):
+    def __init__(self, scene: CheckedScene, escape_time_sets: bool = False):
         self.materials = scene.materials
         self.library = library()
+        self.escape_time_sets = escape_time_sets
 
     def surface_of(self, name: str) -> Surface:
         """The surface of material `name`; its index counts the scene's
@@ -208,7 +209,7 @@ class _Lowerer:
     def primitive(self, s: Primitive, point: Point) -> ir.Expr:
         if s.signature.kind != "fractal":
             return ir.call(s.signature.function, (ir.Vec(point),) + s.args)
-        distance = orbit(s.signature.name, point, s.args).distance
+        distance = self.estimate_or_set(orbit(s.signature.name, point, s.args))
         # A fractal: far from its bounding sphere, the sphere's distance is
         # a safe step and the fractal is not evaluated (Hart et al. 1989).
         radius = ir.call(f"{s.signature.name}_bound_radius", s.args)
@@ -221,10 +222,13 @@ class _Lowerer:
             return surface
         return _trap_colored(surface, coloring, orbit(s.signature.name, point, s.args, trap=True).trap, point)
 
-    @staticmethod
-    def fractal(s: Fractal, point: Point) -> ir.Expr:
-        distance = ir.mul(formula_code.orbit(s.sequence, point, s.iterations, s.bailout, s.julia,
-                                             estimate=s.growth.estimate).distance, s.step)
+    def estimate_or_set(self, found) -> ir.Expr:
+        """A fractal's estimate, or (escape_time_sets) its escape-time set's -1 / 1 where it has a bailout."""
+        return found.inside if self.escape_time_sets and found.inside is not None else found.distance
+
+    def fractal(self, s: Fractal, point: Point) -> ir.Expr:
+        distance = ir.mul(self.estimate_or_set(formula_code.orbit(s.sequence, point, s.iterations, s.bailout,
+                                                                  s.julia, estimate=s.growth.estimate)), s.step)
         if s.bound is None:
             return distance
         bound = ir.call("sd_sphere", (ir.Vec(point), s.bound))
@@ -416,9 +420,11 @@ def _dot(x, y, z) -> ir.Expr:
     return ir.add(ir.add(ir.mul(x, x), ir.mul(y, y)), ir.mul(z, z))
 
 
-def lower(scene: CheckedScene) -> SceneIR:
-    """Lower the scene's shape to its distance and surface expressions."""
-    lowerer = _Lowerer(scene)
+def lower(scene: CheckedScene, escape_time_sets: bool = False) -> SceneIR:
+    """Lower the scene's shape to its distance and surface expressions; with
+    `escape_time_sets`, each fractal that has a bailout as its escape-time
+    set instead (-1 inside, 1 outside: what `check --de` marches to)."""
+    lowerer = _Lowerer(scene, escape_time_sets)
     point = ir.components(POINT)
     default = (lowerer.surface_of(DEFAULT_MATERIAL), None)
     distance, surface = lowerer.shape(scene.shape, point, default)
