@@ -138,6 +138,12 @@ def test_param_override_outside_its_range():
     scene_error("param r = 0.7 in [0.1, 2]\nscene sphere(r)", params={"r": 5})
 
 
+def test_an_unknown_param_is_the_callers_mistake_naming_the_closest():
+    """Was a SceneError at the file's 1:1 (issue 21): nothing in the file is wrong."""
+    with pytest.raises(ValueError, match=r"^the scene has no param 'radus'; did you mean 'radius'\?$"):
+        fractalc.loads("param radius = 0.7 in [0.1, 2]\nscene sphere(radius)", params={"radus": 1})
+
+
 @pytest.mark.parametrize("kind, size", [("spot", ""), ("rectangle", ", width: 2")])
 def test_a_spot_or_rectangle_light_faces_its_target(kind, size):
     """As a camera does: `target` stands for `direction: target - position`."""
