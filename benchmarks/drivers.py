@@ -32,9 +32,12 @@ def main() -> int:
     parser.add_argument("--rounds", type=int, default=11)
     parser.add_argument("--width", type=int, help="override each scene's width (height follows its aspect)")
     args = parser.parse_args()
-    # cold builds: no binary cache anywhere for this process
+    # cold builds: empty binary caches (pyopencl's lives in the XDG cache,
+    # and so do fractalc's and PoCL's unless set elsewhere)
     scratch = tempfile.mkdtemp(prefix="fractalc-drivers-")
-    os.environ.update(PYOPENCL_CACHE_DIR=os.path.join(scratch, "pyopencl"), POCL_CACHE_DIR=os.path.join(scratch, "pocl"))
+    os.environ["XDG_CACHE_HOME"] = scratch
+    for name in ("FRACTALC_CACHE_DIR", "POCL_CACHE_DIR"):
+        os.environ.pop(name, None)
 
     import fractalc
     from fractalc.devices import list_devices, usable

@@ -223,8 +223,7 @@ def run_probe(device_index: int, lanes: int, precisions: tuple[str, ...], comman
     the user's), and its output never reaches the terminal."""
     command = command or probe_command(device_index, lanes, precisions)
     with tempfile.TemporaryDirectory(prefix="fractalc-probe-") as scratch:
-        environment = dict(os.environ, POCL_CACHE_DIR=scratch, PYOPENCL_NO_CACHE="1",
-                           PYOPENCL_CACHE_DIR=scratch)
+        environment = dict(os.environ, POCL_CACHE_DIR=scratch, PYOPENCL_NO_CACHE="1")
         try:
             done = subprocess.run(command, capture_output=True, text=True, timeout=timeout,
                                   env=environment, stdin=subprocess.DEVNULL)

@@ -122,7 +122,7 @@ def fractalc_command(args, tmp_path, **environment) -> subprocess.CompletedProce
     env = {k: v for k, v in os.environ.items() if k not in (
         "OCL_ICD_VENDORS", drivers.REGISTERED_ENVIRONMENT, drivers.SWITCH_ENVIRONMENT, "FRACTALC_DEVICE",
         "FRACTALC_LANES", "POCL_CACHE_DIR")}
-    env.update({CACHE_ENVIRONMENT: str(tmp_path / "cache"), "PYOPENCL_CACHE_DIR": str(tmp_path / "pyopencl")},
+    env.update({CACHE_ENVIRONMENT: str(tmp_path / "cache"), "XDG_CACHE_HOME": str(tmp_path / "xdg")},
                **environment)
     return subprocess.run([sys.executable, "-m", "fractalc", *args], cwd=ROOT, capture_output=True, text=True,
                           env=env, timeout=600)

@@ -272,7 +272,7 @@ def test_first_render_on_a_cold_machine(tmp_path):
     environment = {k: v for k, v in os.environ.items()
                    if k not in ("POCL_CACHE_DIR", lanes.ENVIRONMENT, build_module.VERBOSE_ENVIRONMENT)}
     environment.update({CACHE_ENVIRONMENT: str(tmp_path / "cache"),
-                        "PYOPENCL_CACHE_DIR": str(tmp_path / "pyopencl"), "XDG_CACHE_HOME": str(tmp_path / "xdg")})
+                        "XDG_CACHE_HOME": str(tmp_path / "xdg")})
     out = tmp_path / "out.png"
     done = subprocess.run([sys.executable, "-m", "fractalc", "render", "examples/primitives.frac", "-o", str(out),
                            "--width", "64", "--height", "48"], cwd=ROOT, env=environment,
