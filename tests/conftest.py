@@ -39,3 +39,25 @@ def driver(request):
     except RenderError as error:
         pytest.skip(str(error))
     return request.param
+
+
+def pytest_configure(config):
+    """FRACTALC_RECORD_SCENES=FILE: append every scene the tests load to
+    FILE (JSON lines of text and path), the corpus of
+    benchmarks/kernel_snapshot.py."""
+    import os
+    record = os.environ.get("FRACTALC_RECORD_SCENES")
+    if not record:
+        return
+    import json
+    import fractalc
+    from fractalc import api
+    original = api.loads
+
+    def recording_loads(text, *args, **kwargs):
+        path = kwargs.get("path", args[3] if len(args) > 3 else "<string>")
+        if isinstance(text, str):
+            with open(record, "a") as f:
+                f.write(json.dumps({"text": text, "path": str(path)}) + "\n")
+        return original(text, *args, **kwargs)
+    api.loads = fractalc.loads = recording_loads
