@@ -20,6 +20,7 @@ from ..errors import LINE_BREAK, Span
 NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _TRAILING_COMMA = re.compile(r"[ \t]*,")
 _INDENT = re.compile(r"[ \t]*")
+_COMMENT = re.compile(r"#[^\n\r]*")
 
 
 @dataclass(frozen=True)
@@ -133,7 +134,7 @@ def _insert_entry(text: Text, block: ast.Block, entry: str) -> list[Edit]:
     entries = block.entries
     last_end = text.end(entries[-1].span)
     trailing = _TRAILING_COMMA.match(source, last_end, closing)
-    commas = bool(trailing) or any("," in source[text.end(a.span):text.start(b.span)]
+    commas = bool(trailing) or any("," in _COMMENT.sub("", source[text.end(a.span):text.start(b.span)])
                                    for a, b in zip(entries, entries[1:]))
     after = trailing.end() if trailing else last_end
     own_lines = bool(LINE_BREAK.search(source, opening, text.start(entries[-1].span)))

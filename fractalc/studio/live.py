@@ -5,9 +5,10 @@ Requests wait in one slot each (a text to check, a view to render): a new
 request replaces the one waiting, so under any flood of changes the thread
 does the newest and memory stays bounded. A view is first rendered small
 with one sample (the preview, never cut short: a steady stream of changes
-still shows images), then refined while nothing newer waits: the full-size
-pinhole image, then the running mean of jittered passes up to
-`max_samples`. A refining pass stops at its next tile when a request comes.
+still shows images), then, once no request came for a moment, refined
+while nothing newer waits: the full-size pinhole image, then the running
+mean of jittered two-sample passes up to `max_samples`. A refining pass
+stops at its next tile when a request comes.
 Params and the camera are kernel arguments: only a new scene text builds.
 """
 from __future__ import annotations
@@ -28,7 +29,14 @@ from ..parse import parse
 from ..program import CheckedScene
 from ..write import linear_to_srgb, tone_mapped
 
-PASS_SAMPLES = 2          # samples per refining pass: short passes answer new requests sooner
+# Samples per refining pass: few, so that a pass ends soon when a request
+# comes, but two: one sample is the pinhole ray through the pixel's centre,
+# the same in every pass (LANGUAGE.md's camera model), two are jittered.
+PASS_SAMPLES = 2
+# Refining starts once no request came, and no preview was shown, for this
+# long: while a slider or the camera moves, every image is a preview, and
+# a move finds the thread free.
+REFINE_AFTER_SECONDS = 0.25
 JPEG_QUALITY = 90
 
 
@@ -73,6 +81,7 @@ class LiveRenderer:
         self._text: tuple[int, str, str] | None = None     # (version, text, file) waiting to be checked
         self._view: View | None = None                     # waiting to be rendered
         self._stopped = False
+        self._active = 0.0             # when the last request came or its preview was shown (monotonic)
         self._thread = threading.Thread(target=self._run, name="fractalc-studio-live", daemon=True)
         # the thread's own
         self._scene: Scene | None = None
@@ -93,11 +102,13 @@ class LiveRenderer:
     def check(self, version: int, text: str, file: str) -> None:
         with self._wake:
             self._text = (version, text, file)
+            self._active = time.monotonic()
             self._wake.notify()
 
     def show(self, view: View) -> None:
         with self._wake:
             self._view = view
+            self._active = time.monotonic()
             self._wake.notify()
 
     # ---- the thread ------------------------------------------------------------
@@ -108,6 +119,10 @@ class LiveRenderer:
     def _refining(self) -> bool:
         return self._shown is not None and self._passes * PASS_SAMPLES < self._max_samples
 
+    def _still_for(self) -> float:
+        """Seconds until the view has been still long enough to refine."""
+        return self._active + REFINE_AFTER_SECONDS - time.monotonic()
+
     def _run(self) -> None:
         try:
             self._post("device", build.open_device(self._device).info.name)
@@ -115,8 +130,8 @@ class LiveRenderer:
             self._post("failure", str(error))
         while True:
             with self._wake:
-                while not (self._waiting() or self._refining()):
-                    self._wake.wait()
+                while not (self._waiting() or (self._refining() and self._still_for() <= 0)):
+                    self._wake.wait(self._still_for() if self._refining() else None)
                 if self._stopped:
                     return
                 text, self._text = self._text, None
@@ -148,6 +163,7 @@ class LiveRenderer:
         except SceneError as error:
             self._post("diagnostics", (version, error))
         else:
+            self._shown = None          # the old text's view: refining it is no use now
             self._post("checked", (version, checked))
 
     def _scene_for(self, view: View) -> Scene:
@@ -175,6 +191,7 @@ class LiveRenderer:
         rgb, milliseconds = self._render(view, max(1, width // scale), max(1, height // scale), 1, 0, False)
         self._shown, self._full_size = view, scale == 1
         self._send(view, rgb, 1, milliseconds)
+        self._active = time.monotonic()
 
     def _refine(self) -> None:
         view = self._shown

@@ -8,6 +8,7 @@
   const $ = (id) => document.getElementById(id);
 
   const TEXT_PAUSE_MS = 300;           // typing stops this long: the text is checked and built
+  const VIEW_MS = 16;                  // at most one view change per display frame
   const ORBIT_RADIANS_PER_PIXEL = 0.005;
   const ZOOM_PER_WHEEL_UNIT = 0.001;
   const FLY_SPEED = 0.5;               // of the distance to the target, per second
@@ -18,6 +19,7 @@
   const studio = window.studio = {
     frames: 0, lastFrame: null, seq: 0, scene: null, params: {}, camera: null, fileCamera: null,
     diagnostics: [], dirty: {}, building: false, keyframes: [], presets: {}, job: null, text: "",
+    textSentAt: 0, sceneAt: 0,    // when the page last sent its text, and last had a checked scene
   };
 
   // ---- the connection ---------------------------------------------------------
@@ -71,6 +73,7 @@
     textTimer = null;
     if (editor.text !== studio.text) {
       studio.text = editor.text;
+      studio.textSentAt = performance.now();
       send({ type: "text", text: editor.text });
     }
   }
@@ -113,6 +116,7 @@
       studio.lastFrame = header;
       studio.frames += 1;
       studio.building = false;
+      window.dispatchEvent(new Event("studioframe"));      // for tests and benchmarks: an image was drawn
       $("stats").textContent = `${frameRate.toFixed(1)} fps | ${header.width}x${header.height} | ` +
         `${header.samples} sample${header.samples === 1 ? "" : "s"} | ${header.milliseconds} ms | ${header.builds} builds`;
       updateNote();
@@ -159,18 +163,20 @@
 
   // ---- the view: params and camera --------------------------------------------
 
-  let viewFrame = null, viewPending = {};
+  let viewTimer = null, viewPending = {}, viewSentAt = -Infinity;
 
-  // Changes go out once per animation frame: the newest state wins.
+  // Changes go out at most once per VIEW_MS (the newest state wins), at
+  // once when the last went out longer ago.
   function viewChanged(change) {
     for (const [key, value] of Object.entries(change)) {
       viewPending[key] = key === "params" ? { ...(viewPending.params || {}), ...value } : value;
     }
-    if (viewFrame === null) viewFrame = requestAnimationFrame(sendView);
+    if (viewTimer === null) viewTimer = setTimeout(sendView, Math.max(0, viewSentAt + VIEW_MS - performance.now()));
   }
 
   function sendView() {
-    viewFrame = null;
+    viewTimer = null;
+    viewSentAt = performance.now();
     studio.seq += 1;
     send({ type: "view", seq: studio.seq, ...viewPending });
     viewPending = {};
@@ -180,6 +186,7 @@
 
   function showScene(scene) {
     studio.scene = scene;
+    studio.sceneAt = performance.now();
     $("file").textContent = scene.file;
     const params = $("params");
     params.replaceChildren();
