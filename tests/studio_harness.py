@@ -40,11 +40,11 @@ class StudioProcess:
     """`fractalc studio SCENE --no-browser --port 0 OPTIONS...`; `url` is
     the page's address it prints."""
 
-    def __init__(self, scene: str | os.PathLike, *options: str):
+    def __init__(self, scene: str | os.PathLike, *options: str, cwd: str | os.PathLike | None = None):
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
         self.process = subprocess.Popen([sys.executable, "-m", "fractalc", "studio", str(scene), "--no-browser",
                                          "--port", "0", *options], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                        text=True, env=env)
+                                        text=True, env=env, cwd=cwd)
         lines: queue.Queue = queue.Queue()
         threading.Thread(target=lambda: lines.put(self.process.stdout.readline()), daemon=True).start()
         try:

@@ -12,7 +12,8 @@ import http.client
 import io
 import os
 import re
-import time
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -181,6 +182,74 @@ def test_a_flood_of_changes_renders_the_newest_only(page):
     assert page.evaluate("studio.frames") - frames < 100
 
 
+def test_a_change_of_the_file_on_disk_reloads_the_page(page, studio):
+    settled(page)
+    page.wait_for_function("!studio.dirty.text")
+    text = studio.scene.read_text()
+    studio.scene.write_text(text.replace("param size = 0.6", "param size = 0.7"))
+    page.wait_for_function("studio.editor.text.includes('param size = 0.7')", timeout=WAIT_MS)
+    page.wait_for_function("document.getElementById('param-size').value === '0.7'", timeout=WAIT_MS)
+    # with edits of its own, the page asks
+    _type_at(page, "# A scene", " (edited)")
+    page.wait_for_function("studio.dirty.text", timeout=WAIT_MS)
+    studio.scene.write_text(text)
+    page.wait_for_selector("#banner:not([hidden])", timeout=WAIT_MS)
+    assert "(edited)" in page.evaluate("studio.editor.text")
+    page.locator("#reload").click()
+    page.wait_for_function("studio.editor.text.includes('param size = 0.6') && !studio.dirty.text", timeout=WAIT_MS)
+
+
+def _read(path) -> np.ndarray:
+    import OpenImageIO as oiio
+    image = oiio.ImageInput.open(str(path))
+    pixels = np.asarray(image.read_image(oiio.FLOAT))
+    image.close()
+    return pixels
+
+
+def test_a_final_render_writes_what_its_command_line_renders(page, studio, tmp_path):
+    settled(page)
+    page.locator("#param-size-range").fill("0.9")         # a live value: --set on the command line
+    output = tmp_path / "still.exr"
+    page.locator("#output").fill(str(output))
+    page.locator("#final-width").fill("16")
+    page.locator("#final-height").fill("12")
+    page.locator("#final-samples").fill("2")
+    page.locator("#render-still").click()
+    page.wait_for_function("studio.job && studio.job.state === 'done'", timeout=WAIT_MS)
+    command = page.locator("#render-command").inner_text()
+    assert command.startswith(f"fractalc render {studio.scene} -o {output} ")
+    assert re.search(r" --set size=0\.89\d*( |$)", command)     # the slider's step near 0.9
+    words = command.split()
+    again = tmp_path / "again.exr"
+    words[words.index("-o") + 1] = str(again)
+    done = subprocess.run([sys.executable, "-m", "fractalc", *words[1:], "-q"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert np.array_equal(_read(output), _read(again))
+
+
+def test_a_final_render_can_be_cancelled(page, tmp_path):
+    settled(page)
+    if page.evaluate("studio.keyframes.length") < 2:
+        for time_ in ("0", "1"):
+            page.locator("#time").fill(time_)
+            page.locator("#key-add").click()
+        page.wait_for_function("studio.keyframes.length >= 2")
+    pattern = tmp_path / "frames" / "f_%05d.png"
+    page.locator("#frames-output").fill(str(pattern))
+    page.locator("#final-fps").fill("1000")              # a thousand frames or more
+    page.locator("#final-width").fill("8")
+    page.locator("#final-height").fill("8")
+    page.locator("#render-animation").click()
+    page.wait_for_function("studio.job && studio.job.state === 'running' && studio.job.progress > 0",
+                           timeout=WAIT_MS)
+    page.locator("#render-cancel").click()
+    page.wait_for_function("studio.job.state === 'cancelled'", timeout=WAIT_MS)
+    written = list((tmp_path / "frames").iterdir())
+    assert 0 < len(written) < 1000
+    assert all(f.name.startswith("f_") and f.suffix == ".png" for f in written)    # no partial file
+
+
 def _request(studio, path: str, headers: dict) -> int:
     connection = http.client.HTTPConnection("127.0.0.1", studio.port, timeout=10)
     try:
@@ -209,6 +278,18 @@ def test_requests_without_the_token_or_from_another_site_are_refused(studio):
     assert _request(studio, "/socket" + token, {**WEBSOCKET, "Origin": "http://evil.example"}) == 403
 
 
+@pytest.mark.parametrize("arguments, says", [
+    (["no-such.frac"], "cannot read no-such.frac: no such file"),
+    (["scene.frac", "--live-size", "320"], "--live-size: '320' is not a size WIDTHxHEIGHT"),
+])
+def test_command_line_mistakes_are_usage_errors(tmp_path, arguments, says):
+    (tmp_path / "scene.frac").write_text(SCENE)
+    done = subprocess.run([sys.executable, "-m", "fractalc", "studio", *arguments, "--no-browser"],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=60)
+    assert done.returncode == 2 and says in done.stderr and "Traceback" not in done.stderr
+    assert done.stdout == ""
+
+
 @pytest.mark.skipif(not os.environ.get("FRACTALC_STUDIO_SCREENSHOTS"),
                     reason="FRACTALC_STUDIO_SCREENSHOTS=FOLDER takes the docs' screenshots")
 def test_screenshots_for_the_docs(tmp_path):
@@ -218,7 +299,7 @@ def test_screenshots_for_the_docs(tmp_path):
     folder = os.environ["FRACTALC_STUDIO_SCREENSHOTS"]
     scene = tmp_path / "csg.frac"
     scene.write_text((REPO / "examples" / "csg.frac").read_text())
-    server = StudioProcess(scene, "--max-samples", "16")
+    server = StudioProcess("csg.frac", "--max-samples", "16", cwd=tmp_path)
     browser = Browser(1400, 820)
     try:
         page = browser.open(server.url)

@@ -223,13 +223,13 @@ class StudioServer:
     async def serve(self, ready) -> None:
         """Serve until cancelled (Ctrl-C); `ready(url)` once listening."""
         loop = tornado.ioloop.IOLoop.current()
+        sockets = self._listen()       # a port in use fails before any work
         self.studio = Studio(self.path, self.options, self.broadcast, loop.add_callback)
         application = tornado.web.Application(
             [(r"/", PageHandler, {"server": self}),
              (r"/static/(.*)", StaticHandler, {"server": self, "path": str(STATIC)}),
              (r"/socket", SocketHandler, {"server": self})],
             websocket_max_message_size=MAX_MESSAGE_BYTES, log_function=_quiet)
-        sockets = self._listen()
         server = tornado.httpserver.HTTPServer(application, max_buffer_size=MAX_MESSAGE_BYTES)
         server.add_sockets(sockets)
         watcher = tornado.ioloop.PeriodicCallback(self.studio.poll_disk, POLL_MILLISECONDS)

@@ -47,7 +47,7 @@
   function vectorInputs(spec, value, onChange) {
     const current = Array.isArray(value) ? value.slice() : [0, 0, 0];
     const inputs = current.map((c, i) => {
-      const input = element("input", { type: "number", step: "any", value: c });
+      const input = element("input", { type: "number", step: "any", value: c, className: "component" });
       input.addEventListener("change", () => {
         if (input.value === "" || !Number.isFinite(Number(input.value))) return;
         current[i] = Number(input.value);
@@ -106,11 +106,12 @@
     return row(spec.name, element("span", { className: "disabled-note", textContent: "set by an expression" }));
   }
 
-  function keyControls(container, specs, values, set) {
+  // `computed`: a null value is one an expression computes (a material's),
+  // not a key that is off or unset
+  function keyControls(container, specs, values, set, computed = false) {
     for (const spec of specs) {
       const value = values[spec.name];
-      container.append(value === null && spec.kind !== "block" && spec.kind !== "file" && values.__expressions
-        ? fixedKey(spec) : keyControl(spec, value, [spec.name], set));
+      container.append(computed && value === null ? fixedKey(spec) : keyControl(spec, value, [spec.name], set));
     }
   }
 

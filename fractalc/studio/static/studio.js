@@ -225,7 +225,7 @@
     materials.replaceChildren();
     for (const material of controls.materials) {
       const group = element("div", { className: "group" }, [element("div", { className: "title", textContent: material.name })]);
-      keyControls(group, material.specs, { ...material.values, __expressions: true }, set("material", { name: material.name }));
+      keyControls(group, material.specs, material.values, set("material", { name: material.name }), true);
       materials.append(group);
     }
     if (!controls.materials.length) materials.append(element("span", { className: "disabled-note", textContent: "no materials declared" }));
