@@ -14,6 +14,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -276,6 +277,43 @@ def test_requests_without_the_token_or_from_another_site_are_refused(studio):
     assert _request(studio, "/socket" + token, {**WEBSOCKET, **own}) == 101
     assert _request(studio, "/socket", {**WEBSOCKET, **own}) == 403
     assert _request(studio, "/socket" + token, {**WEBSOCKET, "Origin": "http://evil.example"}) == 403
+
+
+def test_saving_a_file_with_crlf_line_breaks_keeps_them(tmp_path):
+    """The session alone (no server, no browser): a live param saved into a
+    Windows file changes that literal, and every line break stays CRLF."""
+    import threading
+    from fractalc.studio.session import Options, Studio
+    path = tmp_path / "windows.frac"
+    path.write_bytes(SCENE.replace("\n", "\r\n").encode())
+    calls, sent, lock = [], [], threading.Lock()
+
+    def call_soon(function, *args):
+        with lock:
+            calls.append((function, args))
+
+    def run_until(done):      # the event loop's part: what the live thread calls back
+        deadline = time.monotonic() + 60
+        while not done() and time.monotonic() < deadline:
+            with lock:
+                ready, calls[:] = list(calls), []
+            for function, args in ready:
+                function(*args)
+            time.sleep(0.01)
+
+    studio = Studio(str(path), Options(live_size=(16, 12)), sent.append, call_soon)
+    try:
+        run_until(lambda: studio.checked is not None)
+        studio.receive({"type": "view", "seq": 1, "params": {"blend": 0.5}})
+        # the page's text, as a text area has it: "\n" line breaks
+        studio.receive({"type": "text", "text": SCENE + "# the end\n"})
+        run_until(lambda: studio.checked_version == studio.version)
+        studio.receive({"type": "save"})
+    finally:
+        studio.close()
+    assert not [m for m in sent if isinstance(m, dict) and m["type"] == "notice" and m["error"]]
+    saved = path.read_bytes().decode()
+    assert saved == (SCENE + "# the end\n").replace("param blend = 0.25", "param blend = 0.5").replace("\n", "\r\n")
 
 
 @pytest.mark.parametrize("arguments, says", [

@@ -200,3 +200,11 @@ def test_key_specs_are_the_checkers_tables():
     assert (fov.low, fov.high, fov.low_excluded, fov.high_excluded) == (0.0, 180.0, True, True)
     with pytest.raises(ValueError, match="no block 'light laser'"):
         key_specs("light laser")
+
+
+def test_a_file_with_crlf_line_breaks_is_edited_with_new_lines_and_saved_with_its_own(tmp_path):
+    from fractalc.studio.session import read_text
+    (tmp_path / "windows.frac").write_bytes(b"param a = 1\r\nscene sphere(a)\r\n")
+    (tmp_path / "unix.frac").write_bytes(b"param a = 1\nscene sphere(a)\n")
+    assert read_text(str(tmp_path / "windows.frac")) == ("param a = 1\nscene sphere(a)\n", "\r\n")
+    assert read_text(str(tmp_path / "unix.frac")) == ("param a = 1\nscene sphere(a)\n", "\n")

@@ -140,7 +140,7 @@ class SocketHandler(tornado.websocket.WebSocketHandler):
 
     def open(self):
         self.server.sockets.add(self)
-        self.server.studio.hello()
+        self.server.studio.hello(self.queue)
 
     def on_close(self):
         self.server.sockets.discard(self)

@@ -198,6 +198,13 @@ def _keyframe_text(keyframe: Keyframe, params: set[str]) -> tuple[str, dict[str,
     return edits.number_text(keyframe.time), values
 
 
+def read_text(path: str) -> tuple[str, str]:
+    """The scene file's text with "\n" line breaks (as a browser's text
+    area has them), and the line break the file uses, for saving."""
+    text = read_scene_file(path)
+    return text.replace("\r\n", "\n"), "\r\n" if "\r\n" in text else "\n"
+
+
 class Studio:
     """One scene file in the studio. `send(message)` goes to every page
     (a dict, or a live `Frame`); `call_soon(function, *args)` runs a
@@ -207,7 +214,7 @@ class Studio:
         self.path = path
         self.options = options
         self._send = send
-        self.disk_text = read_scene_file(path)
+        self.disk_text, self.newline = read_text(path)
         self.disk_stamp = self._stamp()
         self.text, self.version = self.disk_text, 0
         self.checked: CheckedScene | None = None
@@ -252,18 +259,24 @@ class Studio:
         except Refused as refusal:
             self.notice(str(refusal), error=True)
 
-    def hello(self) -> None:
-        """Everything a page shows, for a page that just connected."""
-        self._send({"type": "device", "name": self.device_name})
-        self._send({"type": "text", "text": self.text, "version": self.version})
-        self._send_diagnostics()
-        if self.checked is not None:
-            self._send_scene()
-        self._send({"type": "status", "building": self.building})
-        if self.job is not None:
-            self._send_job(self.job.status)
-        if self.disk_changed:
-            self._send({"type": "disk_changed"})
+    def hello(self, send: Callable) -> None:
+        """Everything a page shows, sent with `send` to a page that just
+        connected (the others have it)."""
+        everyone, self._send = self._send, send
+        try:
+            self._send({"type": "device", "name": self.device_name})
+            self._send({"type": "text", "text": self.text, "version": self.version})
+            self._send_diagnostics()
+            if self.checked is not None:
+                self._send_scene()
+            self._send({"type": "status", "building": self.building})
+            self._send_dirty()
+            if self.job is not None:
+                self._send_job(self.job.status)
+            if self.disk_changed:
+                self._send({"type": "disk_changed"})
+        finally:
+            self._send = everyone
 
     def on_text(self, message) -> None:
         text = _text(message.get("text"), "the text", MAX_FILE_BYTES)
@@ -440,7 +453,7 @@ class Studio:
                     raise Refused(f"not saved: {error.errors[0].message}") from None
         real = os.path.realpath(self.path)      # a link to the scene file stays a link
         try:
-            with replacing(real) as temporary, open(temporary, "w", encoding="utf-8", newline="") as f:
+            with replacing(real) as temporary, open(temporary, "w", encoding="utf-8", newline=self.newline) as f:
                 f.write(text)
         except RenderError as error:
             raise Refused(str(error)) from None
@@ -472,7 +485,7 @@ class Studio:
             return
         self.disk_stamp = stamp
         try:
-            text = read_scene_file(self.path)
+            text, self.newline = read_text(self.path)
         except (RenderError, SceneError) as error:
             self.notice(str(error).splitlines()[0], error=True)
             return

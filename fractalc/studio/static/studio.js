@@ -41,7 +41,7 @@
 
   const handlers = {
     device: (m) => { $("device").textContent = m.name; },
-    text: (m) => { studio.text = m.text; editor.setText(m.text); },
+    text: (m) => { editor.setText(m.text); studio.text = editor.text; },
     diagnostics: (m) => showDiagnostics(m.items),
     scene: (m) => showScene(m),
     values: (m) => showValues(m),
