@@ -24,6 +24,7 @@ import numpy as np
 from .. import build
 from ..api import Camera, Scene
 from ..check import check
+from ..devices import open_device
 from ..errors import RenderError, SceneError
 from ..parse import parse
 from ..program import CheckedScene
@@ -125,7 +126,7 @@ class LiveRenderer:
 
     def _run(self) -> None:
         try:
-            self._post("device", build.open_device(self._device).info.name)
+            self._post("device", open_device(self._device).info.name)
         except RenderError as error:
             self._post("failure", str(error))
         while True:
