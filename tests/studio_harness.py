@@ -64,7 +64,7 @@ class StudioProcess:
         if self.process.poll() is None:
             self.process.terminate()
             try:
-                self.process.wait(timeout=20)
+                self.process.wait(timeout=60)     # a kernel build in progress finishes first
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()

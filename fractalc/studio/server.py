@@ -76,19 +76,17 @@ class Guard:
                 return False
         return False
 
-    def refusal(self, handler: tornado.web.RequestHandler) -> str | None:
-        """Why a request is refused, or None."""
-        request = handler.request
-        host = request.headers.get("Host", "")
-        if not self.host_allowed(host):
-            return "a Host the studio does not answer to"
-        origin = request.headers.get("Origin")
-        if origin is not None and origin not in (f"http://{host}", f"https://{host}"):
-            return "another site's page"
+    @staticmethod
+    def origin_allowed(request) -> bool:
+        """No Origin header (not a browser's page), or the studio's own page."""
+        origin, host = request.headers.get("Origin"), request.headers.get("Host", "")
+        return origin is None or origin in (f"http://{host}", f"https://{host}")
+
+    def allows(self, handler: tornado.web.RequestHandler) -> bool:
         token = handler.get_query_argument("token", "")
-        if not hmac.compare_digest(token.encode(), self.token.encode()):
-            return "no token"
-        return None
+        return self.host_allowed(handler.request.headers.get("Host", "")) \
+            and self.origin_allowed(handler.request) \
+            and hmac.compare_digest(token.encode(), self.token.encode())
 
 
 class _Guarded(tornado.web.RequestHandler):
@@ -101,7 +99,7 @@ class _Guarded(tornado.web.RequestHandler):
             self.set_header(name, value)
 
     def prepare(self):
-        if self.server.guard.refusal(self) is not None:
+        if not self.server.guard.allows(self):
             raise tornado.web.HTTPError(403)
 
 
@@ -131,12 +129,11 @@ class SocketHandler(tornado.websocket.WebSocketHandler):
         self.sending = False
 
     def prepare(self):
-        if self.server.guard.refusal(self) is not None:
+        if not self.server.guard.allows(self):
             raise tornado.web.HTTPError(403)
 
     def check_origin(self, origin: str) -> bool:
-        return origin in (f"http://{self.request.headers.get('Host', '')}",
-                          f"https://{self.request.headers.get('Host', '')}")
+        return self.server.guard.origin_allowed(self.request)
 
     def open(self):
         self.server.sockets.add(self)
