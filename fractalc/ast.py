@@ -192,6 +192,15 @@ class PathDecl(Node):
     span: Span
 
 
+@node
+class PresetDecl:
+    """`preset NAME { param: value, ... }`: param values saved under a name."""
+    name: str
+    name_span: Span
+    block: Block
+    span: Span
+
+
 # ---- formulas ----------------------------------------------------------------
 
 @node
@@ -227,7 +236,7 @@ class FormulaDecl(Node):
 
 
 Decl = Union[ParamDecl, LetDecl, MaterialDecl, SceneDecl, CameraDecl, LightDecl, RenderDecl, PathDecl,
-             FormulaDecl]
+             PresetDecl, FormulaDecl]
 
 
 @node

@@ -147,7 +147,13 @@ def _load(args):
     keys = _keys_given(args) if hasattr(args, "render") else None
     scene = loads(text, precision=getattr(args, "precision", None), device=getattr(args, "device", None),
                   path=args.scene)
-    scene.set_params(_require_params(getattr(args, "set", None), scene.checked))
+    params = _require_params(getattr(args, "set", None), scene.checked)
+    if getattr(args, "preset", None):
+        try:
+            scene.apply_preset(args.preset)
+        except ValueError as error:
+            raise UsageError(f"--preset {args.preset}: {error}") from None
+    scene.set_params(params)      # --set wins over the preset
     _print_notes(scene.checked)
     if keys:
         _configure(scene, keys)
@@ -286,20 +292,33 @@ def command_check(args) -> int:
 
 
 def command_devices(args) -> int:
-    from .build import list_devices
-    from .lanes import choose, describe
-    devices = list_devices()
-    if not devices:
-        from .build import INSTALL_HINT
-        raise RenderError(INSTALL_HINT)
-    for d in devices:
+    from . import devices as found
+    from .drivers import SWITCH_ENVIRONMENT, bundled_enabled, bundled_libraries
+    from .lanes import UnusableDevice, choose, describe
+    infos = found.list_devices()
+    if not infos:
+        raise RenderError(found.INSTALL_HINT)
+    verdicts = {}
+    for d in infos:
         try:
-            lanes = describe(choose(d, refresh=args.probe))
-        except RenderError as error:
-            lanes = f"unusable: {error}"
-        print(f"{d.index}: {d.name} [{d.kind}] on {d.platform}; {d.version}; "
-              f"{d.compute_units} compute units; double: {'yes' if d.double else 'no'}; "
-              f"rays per work-item: {lanes}")
+            verdicts[d.index] = f"builds: yes; rays per work-item: {describe(choose(d, refresh=args.probe))}"
+        except UnusableDevice as unusable:
+            verdicts[d.index] = f"builds: no: {found.cannot_build(d, unusable.failures)}"
+    try:
+        default = found.default_device(infos).index if not os.environ.get(found.DEVICE_ENVIRONMENT) else None
+    except RenderError:
+        default = None
+    ranks = {d.index: rank for rank, d in enumerate(sorted(infos, key=found.speed_rank), 1)}
+    for d in infos:
+        print(f"{'*' if d.index == default else ' '} {d.index}: {d.name} [{d.kind}] on {d.driver_label}; "
+              f"{d.version}; {d.compute_units} compute units; double: {'yes' if d.double else 'no'}; "
+              f"{verdicts[d.index]}; speed rank {ranks[d.index]} of {len(infos)}")
+    if default is not None:
+        print("* the default: the fastest device that builds (GPU, then Intel's CPU runtime, then PoCL; "
+              "docs/drivers.md); --device N or FRACTALC_DEVICE=N chooses another")
+    for driver, library in bundled_libraries():
+        state = "registered" if bundled_enabled() else f"left out ({SWITCH_ENVIRONMENT}=0)"
+        print(f"bundled driver {driver.distribution}: {library} {state}")
     return 0
 
 
@@ -394,6 +413,31 @@ def command_view(args) -> int:
               f"in a {viewer.width}x{viewer.height} window)")
     else:
         show(viewer)
+    return 0
+
+
+def _size(text: str) -> tuple[int, int]:
+    """WIDTHxHEIGHT, each from 1 to 65536."""
+    width, x, height = text.lower().partition("x")
+    if not (x and width.isascii() and width.isdigit() and height.isascii() and height.isdigit()) \
+            or not (1 <= int(width) <= 65536 and 1 <= int(height) <= 65536):
+        raise argparse.ArgumentTypeError(f"'{text}' is not a size WIDTHxHEIGHT such as 320x180")
+    return int(width), int(height)
+
+
+def command_studio(args) -> int:
+    _require_positive(("--preview-scale", args.preview_scale), ("--max-samples", args.max_samples))
+    if args.port is not None and not 0 <= args.port <= 65535:
+        raise UsageError(f"--port {args.port}: must be from 0 to 65535")
+    _require_file(args.scene)
+    from .studio import MISSING_EXTRA, installed
+    if not installed():
+        raise RenderError(MISSING_EXTRA)
+    from .studio.server import serve
+    from .studio.session import Options
+    options = Options(args.device, args.precision, args.preview_scale, args.max_samples, args.live_size,
+                      _parse_set(args.set))
+    serve(args.scene, options, args.host, args.port, open_browser=not args.no_browser)
     return 0
 
 
@@ -521,6 +565,8 @@ def _parser() -> argparse.ArgumentParser:
 
     def image_options(p):
         key_options(p)
+        p.add_argument("--preset", metavar="NAME", help="the param values of the file's 'preset NAME' "
+                                                       "(--set still wins)")
         p.add_argument("--width", type=int)
         p.add_argument("--height", type=int)
         p.add_argument("--samples", type=int, help="anti-aliasing samples per pixel")
@@ -631,6 +677,26 @@ def _parser() -> argparse.ArgumentParser:
     device_options(view)
     view.set_defaults(run=command_view)
 
+    studio = commands.add_parser("studio", help="edit a scene beside its live image, in a web browser",
+                                 description="Serve a page with the scene's text, a control for every param "
+                                             "and key, its live image, presets, a timeline of keyframes and "
+                                             "final renders; saving writes them into the file. Prints the "
+                                             "page's address (with its token) on one line. Needs the "
+                                             "'studio' extra; see docs/studio.md (and its SSH-tunnel recipe).")
+    studio.add_argument("scene")
+    studio.add_argument("--host", default="127.0.0.1",
+                        help="the address to listen on (default 127.0.0.1: this machine only)")
+    studio.add_argument("--port", type=int, help="the port (default 8765, or the next free one; 0: any)")
+    studio.add_argument("--no-browser", action="store_true", help="do not open the page in a browser")
+    studio.add_argument("--live-size", type=_size, metavar="WxH",
+                        help="the live image's size (default: as large as the page shows it)")
+    studio.add_argument("--preview-scale", type=int, default=2, metavar="N",
+                        help="while anything moves, render at 1/N of the live size (default 2)")
+    studio.add_argument("--max-samples", type=int, default=64, metavar="N",
+                        help="refine a still view up to this many samples per pixel (default 64)")
+    device_options(studio)
+    studio.set_defaults(run=command_studio)
+
     animate = commands.add_parser("animate", help="render the scene's camera path to frames",
                                   description="Render the frames of the scene's 'path' (first keyframe "
                                               "to last, at --fps). Frames already on disk are kept, so "
@@ -663,11 +729,14 @@ def _parser() -> argparse.ArgumentParser:
     device_options(mesh)
     mesh.set_defaults(run=command_mesh)
 
-    devices = commands.add_parser("devices", help="list OpenCL devices and the rays per work-item of each",
-                                  description="List the OpenCL devices. For each CPU device, the rays "
-                                              "per work-item (vector lanes) are the widest width its "
-                                              "driver builds and runs, found by a probe in a child "
-                                              "process and remembered.")
+    devices = commands.add_parser("devices", help="list OpenCL devices, whether each builds, its lanes and speed rank",
+                                  description="List the OpenCL devices with their drivers. For each CPU "
+                                              "device, whether its driver builds fractalc's kernels (if "
+                                              "not, the driver's first error and the fix) and the rays "
+                                              "per work-item (vector lanes): the widest width its driver "
+                                              "builds and runs, found by a probe in a child process and "
+                                              "remembered. The default device (*) is the fastest that "
+                                              "builds.")
     devices.add_argument("--probe", action="store_true", help="probe every device again")
     devices.set_defaults(run=command_devices)
     return parser

@@ -34,6 +34,7 @@ MAX_INVERSE_SQUARE = 1e8
 class Target:
     lanes: int = 8          # rays per work-item: 1 (GPU) or 8/16 (CPU vector lanes)
     double: bool = False    # `real` is double
+    exact_native: bool = False  # the device's native_ functions are exact (lanes.LaneChoice.native_exact)
     count: bool = False     # the counting build's `#if FEATURE_COUNT` lines (fractalc/count.py)
 
 
@@ -555,10 +556,11 @@ def resolve_features(text: str, enabled: dict[str, bool]) -> str:
 
 def fast_math(setting: str, target: Target) -> bool:
     """Whether the kernel uses `native_` functions: `on`, or `auto` on CPUs
-    (vector lanes), where the speed/error sweep measured no error growth
-    (docs/performance.md); never in double, as OpenCL's `native_`
-    functions are float-only."""
-    wanted = setting == "on" or (setting == "auto" and target.lanes > 1)
+    (vector lanes) whose driver's native_ functions the lane probe measured
+    exact (PoCL's; the speed/error sweep measured no error growth there,
+    docs/performance.md; Intel's are approximate: native_exp off by 2e-4);
+    never in double, as OpenCL's `native_` functions are float-only."""
+    wanted = setting == "on" or (setting == "auto" and target.lanes > 1 and target.exact_native)
     return wanted and not target.double
 
 
@@ -687,8 +689,9 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
     normal_method = f"{scene.render.normals}_normal"
     shading_functions = [f for f in lib.closure([normal_method] + shading_needs) if f.name not in placed]
 
-    params = ", ".join(f"[{p.index}] {_comment_text(p.name)} (default {p.default:g})"
-                       for p in scene.params) or "none"
+    # names only: a param's default is no part of the kernel (a new default in
+    # the file is no new source, so no rebuild)
+    params = ", ".join(f"[{p.index}] {_comment_text(p.name)}" for p in scene.params) or "none"
     scalar = "double" if target.double else "float"
     parts = [
         _HEADER.format(version=__version__, file=_comment_text(scene.file),

@@ -16,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from .build import Device
+from .devices import Device
 from .emit import lane_block
 from .errors import RenderError
 from .passes import DEFAULT_CHANNELS
@@ -257,6 +257,21 @@ def distances(program, device: Device, points: np.ndarray, params, lanes: int, d
                                    _constant_buffer(device, params, double), np.int32(padded))
         cl.enqueue_copy(device.queue, result, out)
     return result[:count].astype(np.float64)
+
+
+class ProgressReporter:
+    """A render's progress for a function: `report(done, total)` in
+    pixels after each tile (an exception it raises stops the render)."""
+
+    def __init__(self, report: Callable[[int, int], None], total_pixels: int):
+        self.report, self.total, self.done = report, total_pixels, 0
+
+    def update(self, pixels: int) -> None:
+        self.done += pixels
+        self.report(self.done, self.total)
+
+    def close(self) -> None:
+        pass
 
 
 def terminal_progress(total_pixels: int):
