@@ -224,7 +224,7 @@ class _Checker:
             defaults.append(value.data)
         try:
             formula = formula_code.split(decl, self.program.file)
-            formula_code.orbit((formula_code.Use(formula, tuple(defaults)),), _PROBE_POINT, ir.const(2.0))
+            formula_code.orbit((formula_code.Use(formula, tuple(defaults)),), formula_code.POINT, ir.const(2.0))
         except formula_code.Mistake as mistake:
             self.error(mistake.span, mistake.message)
             return
@@ -268,7 +268,7 @@ class _Checker:
         sizes = {}                     # 3 or 4 -> the first formula whose z has that many components
         for use in sequence:
             try:
-                size = formula_code.z_size(use, _PROBE_POINT)
+                size = formula_code.z_size(use, formula_code.POINT)
             except formula_code.Mistake:
                 continue               # the formula's own mistake, reported where it is used
             if size in (3, 4):
@@ -316,7 +316,7 @@ class _Checker:
                              for chosen in ([None] * len(params), [p.low for p in params], [p.high for p in params]))
         try:
             growth = formula_code.growth(formula.data, values["julia"], param_values)
-            formula_code.orbit(formula.data, _PROBE_POINT, ir.const(2.0), values["bailout"], values["julia"],
+            formula_code.orbit(formula.data, formula_code.POINT, ir.const(2.0), values["bailout"], values["julia"],
                                where=e.span, estimate=growth.estimate)
         except formula_code.Mistake as mistake:
             inside = next((u.formula for u in formula.data if u.formula.file != self.program.file), None)
@@ -1149,9 +1149,6 @@ FORMULA_FORMS = {
 # `library.NAME(...)` names the library's formula NAME (unless the file
 # declares a value called `library`)
 LIBRARY = "library"
-# The point formulas are tried at when checked
-_PROBE_POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
-
 
 @lru_cache(maxsize=1)
 def library_formulas() -> tuple[tuple[str, tuple], ...]:

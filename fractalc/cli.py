@@ -229,10 +229,10 @@ def _count(n: int, word: str) -> str:
     return f"{n} {word}{'' if n == 1 else 's'}"
 
 
-def _checked_summary(scene) -> str:
-    """`check`'s line for a scene that checks: its parts, formulas, params,
-    lights and the optional features its kernel will have (and, printed on
-    stderr, a note at each fractal of the estimate it gets)."""
+def _checked_summary(scene) -> tuple[str, list]:
+    """`check`'s line for a scene that checks (its parts, formulas, params,
+    lights and the optional features its kernel will have) and its notes of
+    the estimate each fractal gets, in source order."""
     from .emit import features
     from .errors import Severity, diagnostic
     from .lower import lower
@@ -259,22 +259,24 @@ def _checked_summary(scene) -> str:
         return ((shape.shape, None),) if isinstance(shape, (Transformed, WithMaterial)) else ()
 
     fold_shape(checked.shape, None, parts, lambda *_: None)
-    for note in sorted(notes, key=lambda d: (d.line, d.column)):
-        print(note, file=sys.stderr)
     shown = ", ".join(_count(kinds[k], k) for k in ("shape", "fractal", "combination", "transform") if k in kinds)
     on = [name.lower().replace("_", " ") for name, enabled in features(lower(checked)).items() if enabled]
-    return "; ".join((
+    line = "; ".join((
         f"{scene.checked.file}: ok: {_count(sum(kinds.values()), 'part')} ({shown})",
         f"formulas: {', '.join(formulas)}" if formulas else "no formulas",
         f"{_count(len(checked.params), 'param')}" + (f" ({', '.join(p.name for p in checked.params)})"
                                                       if checked.params else ""),
         _count(len(checked.lights), "light") if checked.lights else "the headlight",
         f"kernel features: {', '.join(on) or 'none'}"))
+    return line, sorted(notes, key=lambda d: (d.line, d.column))
 
 
 def command_check(args) -> int:
     if not args.de:
-        print(_checked_summary(_load(args)))
+        line, notes = _checked_summary(_load(args))
+        for note in notes:
+            print(note, file=sys.stderr)
+        print(line)
         return 0
     from .overstep import Against, has_escape_time_set, measure
     _require_positive(("--rays", args.rays))

@@ -588,7 +588,8 @@ GROWTH_RADII = (1e2, 1e4)
 ESCAPE_GROWTH = 1.5
 _GROWTH_DIRECTIONS = 32
 _NEAR = (0.1, -0.2, 0.3)            # c while measuring (Mandelbrot mode): a point near the origin
-_POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
+# The sample point as IR, where formulas are checked and measured
+POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
 
 
 @dataclass(frozen=True)
@@ -643,7 +644,7 @@ def _far_step_length(use: Use, julia: ir.Vec | None) -> ir.Expr:
     fits = julia is not None and len(julia.items) == len(start["z"].items)     # else orbit's mistake
     env = {"c": vector(julia.items) if fits else vector((*near.items, *extra)),
            **_environment(use), **{name: start[name] for name in use.formula.carried if name != "z"},
-           "z": vector((*_POINT, *extra), (ONE, ZERO))}
+           "z": vector((*POINT, *extra), (ONE, ZERO))}
     return ir.length(Interpreter().run(use.formula.step, env, _readonly(use))["z"].items)
 
 
