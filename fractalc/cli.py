@@ -66,6 +66,10 @@ def _require_file(path: str) -> str:
         raise UsageError(str(error)) from None
 
 
+# why --aov refuses other formats than EXR
+_AOV_IN_EXR = " (passes are EXR channels; PNG and other formats hold R G B A only)"
+
+
 def _passes(text: str) -> list[str]:
     """--aov's value: pass names, comma-separated."""
     names = [name.strip() for name in text.split(",") if name.strip()]
@@ -180,6 +184,8 @@ def command_render(args) -> int:
     for option, given in (("--half", args.half), ("--compression", args.compression)):
         if given and not exr:
             raise UsageError(f"{option} is for EXR output, not {args.output}")
+    if args.aov and not exr:
+        raise UsageError(f"--aov is for EXR output, not {args.output}{_AOV_IN_EXR}")
     if args.bits != 8 and exr:
         raise UsageError(f"--bits is for PNG (and other integer) output, not {args.output}")
     _require_writable(("-o", args.output, args.output))
@@ -389,6 +395,8 @@ def command_animate(args) -> int:
         raise UsageError(f"-o {args.output}: the name must hold the frame number, e.g. frames/frame_%04d.png")
     if not first.lower().endswith((".exr", ".png")):
         raise UsageError(f"-o {args.output}: frames must be .exr or .png")
+    if args.aov and not first.lower().endswith(".exr"):
+        raise UsageError(f"--aov is for EXR frames, not {args.output}{_AOV_IN_EXR}")
     if args.mp4 and not args.mp4.lower().endswith(".mp4"):
         raise UsageError(f"--mp4 {args.mp4}: the name must end in .mp4")
     if args.mp4 and args.frames:
@@ -503,7 +511,7 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--seed", type=_seed, default=0, help="jitter seed for samples > 1")
         p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
         p.add_argument("--aov", type=_passes, action="extend", metavar="PASS[,PASS...]",
-                       help=f"add passes to the EXR (repeatable): {', '.join(PASSES)} "
+                       help=f"add passes to the EXR (repeatable; EXR output only): {', '.join(PASSES)} "
                             "(see docs/compositing.md)")
         farm = p.add_mutually_exclusive_group()
         farm.add_argument("--workers", type=int, metavar="N",

@@ -236,9 +236,13 @@ def test_cli_half_and_compression_and_16_bit_png(tmp_path):
     spec, planes = read(png)
     assert str(spec.format) == "uint16"
     assert len(np.unique(planes["R"])) > 256     # more levels than 8 bits hold
-    for bad in (["--half"], ["--compression", "zip"]):
+    for bad in (["--half"], ["--compression", "zip"], ["--aov", "ao,P"]):
         done = _fractalc("render", str(scene), "-o", str(tmp_path / "x.png"), *bad)
-        assert done.returncode == 2 and bad[0] in done.stderr and "Traceback" not in done.stderr
+        assert done.returncode == 2 and f"{bad[0]} is for EXR output" in done.stderr, done.stderr
+        assert "Traceback" not in done.stderr
+    # passes in PNG frames would be dropped as well
+    done = _fractalc("animate", str(scene), "-o", str(tmp_path / "f%d.png"), "--aov", "ao")
+    assert done.returncode == 2 and "--aov is for EXR frames" in done.stderr, done.stderr
     done = _fractalc("render", str(scene), "-o", str(tmp_path / "x.exr"), "--aov", "colour")
     assert done.returncode == 2 and "--aov" in done.stderr and "unknown pass 'colour'" in done.stderr
     assert not (tmp_path / "x.exr").exists() and not (tmp_path / "x.png").exists()
