@@ -291,7 +291,20 @@ class _Lowerer:
         if kind == "scale":
             return ir.mul(d, args[0]), surface
         if kind in ("twist", "bend"):
-            return ir.div(d, ir.call(f"{kind}_lipschitz", (ir.Vec(point), _warp_rate(args[0])))), surface
+            warped = ir.div(d, ir.call(f"{kind}_lipschitz", (ir.Vec(point), _warp_rate(args[0]))))
+            inner = _Bounds().of(s.shape)
+            if inner is None or inner.sphere is None or inner.half_spaces:
+                return warped, surface
+            # Dividing by the warp's Lipschitz factor, which grows with the
+            # distance from the axis, caps the estimate near 1 / rate however
+            # far the point is: the march crawls and a soft shadow's k d / t
+            # reads the cap as a near miss (rings on a floor). The warp keeps
+            # the sphere about its axis that holds the shape, and that
+            # sphere's distance is a lower bound too: the larger of the two,
+            # and the sphere's alone far from it (as a fractal's bound).
+            centre, radius = _warped_sphere(kind, inner.sphere)
+            bound = ir.call("sd_sphere", (ir.Vec(tuple(ir.sub(p, c) for p, c in zip(point, centre))), radius))
+            return ir.bounded(bound, ir.op("max", warped, bound), ir.mul(radius, ir.const(BOUND_MARGIN))), surface
         if kind == "round":
             return ir.sub(d, args[0]), surface
         if kind == "onion":
@@ -343,8 +356,10 @@ class _Bounds:
         if isinstance(s, Combination):
             return self._combination(s, bounds)
         inner = bounds[0]
-        if inner is None or s.kind in ("repeat", "twist", "bend"):
+        if inner is None or s.kind == "repeat":
             return None
+        if s.kind in ("twist", "bend"):     # a warped half-space is no half-space
+            return None if inner.sphere is None or inner.half_spaces else Bound(_warped_sphere(s.kind, inner.sphere))
         return Bound(self._moved_sphere(s, inner.sphere),
                      tuple(self._moved_half_space(s, h) for h in inner.half_spaces))
 
@@ -412,6 +427,22 @@ class _Bounds:
         if s.kind == "round":
             return normal, ir.add(offset, args[0])
         return normal, offset    # onion: inside the shape
+
+
+def _warped_sphere(kind: str, sphere: Sphere) -> Sphere:
+    """A sphere that holds a twisted (bent) shape, from one that holds the
+    shape: a twist turns each point about the z axis (a bend, about the y
+    axis), which keeps its distance to every point of that axis, so the
+    sphere about the axis point nearest the centre that holds the first
+    sphere holds the warped shape."""
+    (x, y, z), radius = sphere
+    zero = ir.const(0.0)
+    if kind == "twist":
+        centre, off_axis = (zero, zero, z), (x, y)
+    else:
+        centre, off_axis = (zero, y, zero), (x, z)
+    across = ir.op("sqrt", ir.add(ir.mul(off_axis[0], off_axis[0]), ir.mul(off_axis[1], off_axis[1])))
+    return centre, ir.add(radius, across)
 
 
 def _dot3(a: Point, b: Point) -> ir.Expr:
