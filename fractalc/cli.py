@@ -447,9 +447,14 @@ def _bounds(text: str) -> tuple[float, ...]:
 
 
 def command_mesh(args) -> int:
-    from .mesh import FORMATS, require_scikit_image
+    from .mesh import FORMATS, Shells, require_scikit_image
     if not args.output.lower().endswith(FORMATS):
         raise UsageError(f"-o {args.output}: the output must end in one of {', '.join(FORMATS)}")
+    shells = Shells(args.shells) if args.shells else Shells.default_for(args.output)
+    if args.min_volume is not None and shells is not Shells.SOLID:
+        raise UsageError("--min-volume is for --shells solid (the default for .stl): it chooses the bodies kept")
+    if args.min_volume is not None and not args.min_volume > 0:
+        raise UsageError(f"--min-volume {args.min_volume:g}: must be greater than 0")
     if not 2 <= args.resolution <= 16384:
         raise UsageError("--resolution must be from 2 to 16384")
     try:
@@ -469,14 +474,20 @@ def command_mesh(args) -> int:
         mesh = scene.mesh(resolution=args.resolution, bounds=args.bounds, progress=not args.quiet)
     except ValueError as error:     # no surface inside the bounds
         raise RenderError(str(error)) from None
+    removed = None
+    if shells is Shells.SOLID:
+        mesh, removed = mesh.solid(args.min_volume)
     mesh.save(args.output)
     if not args.quiet:
         print(f"wrote {args.output} ({len(mesh.vertices)} vertices, {len(mesh.faces)} triangles, "
               f"{time.perf_counter() - start:.2f} s)", file=sys.stderr)
+        if removed is not None:
+            print(f"{args.output}: {removed.summary()}", file=sys.stderr)
     return 0
 
 
 def _parser() -> argparse.ArgumentParser:
+    from .mesh import Shells
     parser = argparse.ArgumentParser(prog="fractalc", description="Compile and render .frac fractal scenes.")
     from . import __version__
     parser.add_argument("--version", action="version", version=f"fractalc {__version__}")
@@ -663,6 +674,13 @@ def _parser() -> argparse.ArgumentParser:
     mesh.add_argument("--bounds", type=_bounds, metavar="XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX",
                       help="the box to mesh, written --bounds=-1,-1,-1,1,1,1 when it starts with a "
                            "minus (default: around the scene's bound; required for unbounded scenes)")
+    mesh.add_argument("--shells", choices=[shells.value for shells in Shells],
+                      help="solid: the largest body alone, its internal voids filled and loose specks "
+                           "removed (the default for .stl, which printers read); all: every closed surface "
+                           "(the default for .ply and .obj)")
+    mesh.add_argument("--min-volume", type=float, metavar="V",
+                      help="with --shells solid: keep every separate body of at least this volume "
+                           "(scene units cubed), not only the largest")
     mesh.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     device_options(mesh)
     mesh.set_defaults(run=command_mesh)
