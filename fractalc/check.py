@@ -23,7 +23,7 @@ from .program import (DEFAULT_MATERIAL, PROJECTIONS, STEREO_LAYOUTS, Camera, Cam
                       light_vector_key)
 from .parse import parse
 from .resources import resource_dir
-from .stdlib import COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
+from .stdlib import AUTO_SCALE, COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
 
 # The language's value types.
 NUM, SHAPE, MATERIAL, WORD, COLORING, FORMULA = "number", "shape", "material", "word", "coloring", "formula"
@@ -610,10 +610,10 @@ class _Checker:
         if name == "palette":
             *palette, trap, scale = self.bound_args(e, COLORINGS[name], e.args)
             start = cosine_palette(tuple(palette), ir.const(0.0))
-            return Value(COLORING, Coloring(start, start, trap, scale, tuple(palette)))
+            return Value(COLORING, Coloring(start, start, trap, _given_scale(scale), tuple(palette)))
         if name in COLORINGS:
             near, far, trap, scale = self.bound_args(e, COLORINGS[name], e.args)
-            return Value(COLORING, Coloring(near, far, trap, scale))
+            return Value(COLORING, Coloring(near, far, trap, _given_scale(scale)))
         signature = self.library.signatures.get(name)
         if signature is None:
             hint = self.did_you_mean(name, self.library.signatures, COMBINATORS, MATH, COLORINGS, self.formulas)
@@ -914,6 +914,11 @@ def _source_text(program: ast.Program, span: Span) -> str:
     if span.line != span.end_line or not 0 < span.line <= len(lines):
         return "this"
     return lines[span.line - 1][span.column - 1:span.end_column - 1]
+
+
+def _given_scale(scale):
+    """An orbit trap's scale, or None for the default: spread over the trap's range."""
+    return None if scale == AUTO_SCALE else scale
 
 
 def _default(p: Parameter):

@@ -59,7 +59,7 @@ class Coloring:
     near: ir.Vec
     far: ir.Vec
     trap: str                   # one of stdlib.TRAP_KINDS
-    scale: ir.Expr
+    scale: ir.Expr | None       # None: `auto`, spread over the trap's range (fractalc/lower.py)
     palette: tuple[ir.Vec, ir.Vec, ir.Vec, ir.Vec] | None = None   # a, b, c, d
 
 

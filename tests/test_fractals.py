@@ -697,6 +697,31 @@ def test_orbit_trap_colour_lies_between_near_and_far_and_follows_the_trap():
     assert np.median(difference) < 1e-2 and np.percentile(difference, 90) < 0.1
 
 
+def test_orbit_trap_defaults_spread_the_colour_over_the_fractal():
+    # trap and scale left to their defaults: the nearest plane's distance,
+    # t = 1 + ln(trap) / 5 (lower.TRAP_DECADES). The default was once the
+    # origin trap at scale 1: t = 1 (all `far`) on every Mandelbulb and
+    # Mandelbox pixel.
+    weights = {}
+    for name in ("mandelbulb", "mandelbox"):
+        camera = CAMERAS[name]
+        near, far = (f"({', '.join(map(str, colour))})" for colour in (NEAR, FAR))
+        text = camera_scene(f"scene {name}().color(orbit_trap(near: {near}, far: {far}))\n{DARK}",
+                            camera, extra=", background: (0, 0, 0)")
+        image = scene(text).render(width=W, height=H)
+        hit, albedo = _albedo(image)
+        weights[name] = ((albedo - NEAR) / (FAR - NEAR)).mean(axis=1)
+        assert hit.mean() > 0.1
+        low, high = np.percentile(weights[name], [5, 95])
+        assert high - low > 0.5, (name, low, high)
+        if name == "mandelbulb":
+            origin, dirs = primary_rays(camera["position"], fov=camera["fov"])
+            points = origin + dirs[hit] * image.depth[hit][:, None]
+            expected = np.clip(1 + np.log(mandelbulb_trap(points, "planes")) / 5, 0, 1)
+            difference = np.abs(weights[name] - expected)
+            assert np.median(difference) < 1e-2 and np.percentile(difference, 90) < 0.1
+
+
 def test_orbit_trap_colours_and_scale_change_the_image_as_predicted_without_rebuilding():
     s = trap_scene("mandelbulb()")
     s.set_params({**_colour_params(NEAR, FAR), "ts": 0.8})
