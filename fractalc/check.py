@@ -24,6 +24,7 @@ from .program import (DEFAULT_MATERIAL, PROJECTIONS, STEREO_LAYOUTS, Camera, Cam
 from .parse import parse
 from .resources import resource_dir
 from .stdlib import AUTO_SCALE, COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
+from .write import TONE_CURVES
 
 # The language's value types.
 NUM, SHAPE, MATERIAL, WORD, COLORING, FORMULA = "number", "shape", "material", "word", "coloring", "formula"
@@ -1015,7 +1016,7 @@ RENDER_KEYS = _keys(
     _P("overrelax", "num", None, "1..1.99"), _P("cone_marching", "word:on|off"),
     _P("epsilon_scale", "num", None, ">0", f"<={MAX_EPSILON_SCALE:g}"),
     _P("normals", "word:tetrahedral|central|forward"), _P("fast_math", "word:auto|on|off"),
-    _P("exposure", "num", None, "-20..20"), _P("tonemap", "word:none|reinhard|aces"),
+    _P("exposure", "num", None, "-20..20"), _P("tonemap", "word:" + "|".join(TONE_CURVES)),
     _P("integrator", "word:direct|path"), _P("bounces", "int", None, "1..64"),
     _P("environment", "block:environment"))
 
