@@ -22,7 +22,7 @@ from . import __version__
 from .api import Scene
 from .errors import RenderError
 from .paths import camera_at, frame_times, params_at
-from .write import linear_to_srgb, replacing, tone_mapped
+from .write import DEFAULT_TONE_CURVE, linear_to_srgb, replacing, tone_mapped
 
 
 def frame_file(pattern: str, index: int) -> str:
@@ -171,7 +171,7 @@ def _display_pixels(file: str) -> np.ndarray:
     image.close()
     if file.lower().endswith(".exr"):
         exposure = float(spec.get_string_attribute("fractalc:render.exposure", "0"))
-        curve = spec.get_string_attribute("fractalc:render.tonemap", "none")
+        curve = spec.get_string_attribute("fractalc:render.tonemap", DEFAULT_TONE_CURVE)
         pixels = linear_to_srgb(tone_mapped(pixels, exposure, curve))
     return np.round(np.clip(pixels, 0.0, 1.0) * 255.0).astype(np.uint8)
 

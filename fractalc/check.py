@@ -23,7 +23,8 @@ from .program import (DEFAULT_MATERIAL, PROJECTIONS, STEREO_LAYOUTS, Camera, Cam
                       light_vector_key)
 from .parse import parse
 from .resources import resource_dir
-from .stdlib import COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
+from .stdlib import AUTO_SCALE, COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
+from .write import TONE_CURVES
 
 # The language's value types.
 NUM, SHAPE, MATERIAL, WORD, COLORING, FORMULA = "number", "shape", "material", "word", "coloring", "formula"
@@ -651,10 +652,10 @@ class _Checker:
         if name == "palette":
             *palette, trap, scale = self.bound_args(e, COLORINGS[name], e.args)
             start = cosine_palette(tuple(palette), ir.const(0.0))
-            return Value(COLORING, Coloring(start, start, trap, scale, tuple(palette)))
+            return Value(COLORING, Coloring(start, start, trap, _given_scale(scale), tuple(palette)))
         if name in COLORINGS:
             near, far, trap, scale = self.bound_args(e, COLORINGS[name], e.args)
-            return Value(COLORING, Coloring(near, far, trap, scale))
+            return Value(COLORING, Coloring(near, far, trap, _given_scale(scale)))
         signature = self.library.signatures.get(name)
         if signature is None:
             hint = self.did_you_mean(name, self.library.signatures, COMBINATORS, MATH, COLORINGS, self.formulas)
@@ -974,6 +975,11 @@ def _source_text(program: ast.Program, span: Span) -> str:
     return lines[span.line - 1][span.column - 1:span.end_column - 1]
 
 
+def _given_scale(scale):
+    """An orbit trap's scale, or None for the default: spread over the trap's range."""
+    return None if scale == AUTO_SCALE else scale
+
+
 def _default(p: Parameter):
     if isinstance(p.default, str):
         return p.default
@@ -1070,7 +1076,7 @@ RENDER_KEYS = _keys(
     _P("overrelax", "num", None, "1..1.99"), _P("cone_marching", "word:on|off"),
     _P("epsilon_scale", "num", None, ">0", f"<={MAX_EPSILON_SCALE:g}"),
     _P("normals", "word:tetrahedral|central|forward"), _P("fast_math", "word:auto|on|off"),
-    _P("exposure", "num", None, "-20..20"), _P("tonemap", "word:none|reinhard|aces"),
+    _P("exposure", "num", None, "-20..20"), _P("tonemap", "word:" + "|".join(TONE_CURVES)),
     _P("integrator", "word:direct|path"), _P("bounces", "int", None, "1..64"),
     _P("environment", "block:environment"))
 

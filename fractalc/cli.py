@@ -66,6 +66,10 @@ def _require_file(path: str) -> str:
         raise UsageError(str(error)) from None
 
 
+# why --aov refuses other formats than EXR
+_AOV_IN_EXR = " (passes are EXR channels; PNG and other formats hold R G B A only)"
+
+
 def _passes(text: str) -> list[str]:
     """--aov's value: pass names, comma-separated."""
     names = [name.strip() for name in text.split(",") if name.strip()]
@@ -198,6 +202,8 @@ def command_render(args) -> int:
     for option, given in (("--half", args.half), ("--compression", args.compression)):
         if given and not exr:
             raise UsageError(f"{option} is for EXR output, not {args.output}")
+    if args.aov and not exr:
+        raise UsageError(f"--aov is for EXR output, not {args.output}{_AOV_IN_EXR}")
     if args.bits != 8 and exr:
         raise UsageError(f"--bits is for PNG (and other integer) output, not {args.output}")
     _require_writable(("-o", args.output, args.output))
@@ -461,6 +467,8 @@ def command_animate(args) -> int:
         raise UsageError(f"-o {args.output}: the name must hold the frame number, e.g. frames/frame_%04d.png")
     if not first.lower().endswith((".exr", ".png")):
         raise UsageError(f"-o {args.output}: frames must be .exr or .png")
+    if args.aov and not first.lower().endswith(".exr"):
+        raise UsageError(f"--aov is for EXR frames, not {args.output}{_AOV_IN_EXR}")
     if args.mp4 and not args.mp4.lower().endswith(".mp4"):
         raise UsageError(f"--mp4 {args.mp4}: the name must end in .mp4")
     if args.mp4 and args.frames:
@@ -511,9 +519,14 @@ def _bounds(text: str) -> tuple[float, ...]:
 
 
 def command_mesh(args) -> int:
-    from .mesh import FORMATS, require_scikit_image
+    from .mesh import FORMATS, Shells, require_scikit_image
     if not args.output.lower().endswith(FORMATS):
         raise UsageError(f"-o {args.output}: the output must end in one of {', '.join(FORMATS)}")
+    shells = Shells(args.shells) if args.shells else Shells.default_for(args.output)
+    if args.min_volume is not None and shells is not Shells.SOLID:
+        raise UsageError("--min-volume is for --shells solid (the default for .stl): it chooses the bodies kept")
+    if args.min_volume is not None and not args.min_volume > 0:
+        raise UsageError(f"--min-volume {args.min_volume:g}: must be greater than 0")
     if not 2 <= args.resolution <= 16384:
         raise UsageError("--resolution must be from 2 to 16384")
     try:
@@ -533,14 +546,20 @@ def command_mesh(args) -> int:
         mesh = scene.mesh(resolution=args.resolution, bounds=args.bounds, progress=not args.quiet)
     except ValueError as error:     # no surface inside the bounds
         raise RenderError(str(error)) from None
+    removed = None
+    if shells is Shells.SOLID:
+        mesh, removed = mesh.solid(args.min_volume)
     mesh.save(args.output)
     if not args.quiet:
         print(f"wrote {args.output} ({len(mesh.vertices)} vertices, {len(mesh.faces)} triangles, "
               f"{time.perf_counter() - start:.2f} s)", file=sys.stderr)
+        if removed is not None:
+            print(f"{args.output}: {removed.summary()}", file=sys.stderr)
     return 0
 
 
 def _parser() -> argparse.ArgumentParser:
+    from .mesh import Shells
     parser = argparse.ArgumentParser(prog="fractalc", description="Compile and render .frac fractal scenes.")
     from . import __version__
     parser.add_argument("--version", action="version", version=f"fractalc {__version__}")
@@ -575,7 +594,7 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--seed", type=_seed, default=0, help="jitter seed for samples > 1")
         p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
         p.add_argument("--aov", type=_passes, action="extend", metavar="PASS[,PASS...]",
-                       help=f"add passes to the EXR (repeatable): {', '.join(PASSES)} "
+                       help=f"add passes to the EXR (repeatable; EXR output only): {', '.join(PASSES)} "
                             "(see docs/compositing.md)")
         farm = p.add_mutually_exclusive_group()
         farm.add_argument("--workers", type=int, metavar="N",
@@ -727,6 +746,13 @@ def _parser() -> argparse.ArgumentParser:
     mesh.add_argument("--bounds", type=_bounds, metavar="XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX",
                       help="the box to mesh, written --bounds=-1,-1,-1,1,1,1 when it starts with a "
                            "minus (default: around the scene's bound; required for unbounded scenes)")
+    mesh.add_argument("--shells", choices=[shells.value for shells in Shells],
+                      help="solid: the largest body alone, its internal voids filled and loose specks "
+                           "removed (the default for .stl, which printers read); all: every closed surface "
+                           "(the default for .ply and .obj)")
+    mesh.add_argument("--min-volume", type=float, metavar="V",
+                      help="with --shells solid: keep every separate body of at least this volume "
+                           "(scene units cubed), not only the largest")
     mesh.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     device_options(mesh)
     mesh.set_defaults(run=command_mesh)

@@ -352,12 +352,11 @@ def _light_block(index: int, light: Light, bound, transparent: bool, passes: boo
         facing = _vector(tuple(c / length for c in light.direction))
         lines.append(f"        radiance = v3_scale(radiance, max(-v3_dot(to_light, {facing}), 0.0f));")
     needs = set()
-    if bound is not None and light.shadows != "none":
-        # past the scene's bounding sphere nothing can block the light, nor
-        # anywhere if the ray misses it (two statements: C leaves the order
-        # of a call's arguments open) ...
+    widened = _shadow_bound_radius(light)
+    if bound is not None and widened is not None:
+        # (two statements: C leaves the order of a call's arguments open) ...
         lines += ["        real enter, leave;",
-                  "        mask toward_bound = ray_sphere_span(lifted, to_light, bound_centre, bound_radius, "
+                  f"        mask toward_bound = ray_sphere_span(lifted, to_light, bound_centre, {widened}, "
                   "&enter, &leave);"]
         bounded_reach = "SELECT((real)0.0f, fmin(reach, leave), toward_bound)"
         if bound.half_spaces:
@@ -386,6 +385,23 @@ def _light_block(index: int, light: Light, bound, transparent: bool, passes: boo
         lines.append("        passes->shadow = passes->shadow + (1.0f - visible);")
     lines.append("    }")
     return "\n".join(lines), needs
+
+
+def _shadow_bound_radius(light: Light) -> str | None:
+    """The radius about the scene's bounding sphere's centre past which a
+    light's shadow ray meets nothing that dims it (None: no such radius).
+    A shadow ray is blocked where it passes within the hit threshold of a
+    surface, as a camera ray hits it; a soft shadow dims the light where
+    k d / t < 1 along it. For a soft shadow the sphere widens by
+    (|o - c| + R) / (k - 1): a ray that misses the sphere by s has d >= s,
+    and d >= t - |o - c| - R, so k d / t >= 1 for every t once s is that
+    wide (and past the widened sphere). With k <= 1 no width will do."""
+    if light.shadows == "hard":
+        return "bound_radius + threshold"
+    if light.shadows == "soft" and light.softness > 1.0:
+        return ("bound_radius + threshold + (v3_length(v3_sub(lifted, bound_centre)) + bound_radius) * "
+                f"{literal(1.0 / (light.softness - 1.0))}")
+    return None
 
 
 def _spot_lines(light: Light, radiance: str, to_light: str, indent: str) -> list[str]:

@@ -19,6 +19,7 @@ only underestimates the distance.
 """
 from __future__ import annotations
 
+import enum
 import math
 import sys
 from dataclasses import dataclass
@@ -28,6 +29,7 @@ import numpy as np
 from .write import replacing
 
 FORMATS = (".stl", ".ply", ".obj")
+PRINTING_FORMATS = (".stl",)    # read by slicers, which want one solid
 INSTALL_HINT = "meshes need scikit-image: pip install 'fractalc[mesh]'"
 CHUNK_POINTS = 1 << 21   # distance evaluations per kernel call: ~100 MB of host arrays at most
 DEFAULT_RESOLUTION = 256
@@ -55,8 +57,61 @@ class Mesh:
 
     def volume(self) -> float:
         """The enclosed volume (divergence theorem; exact for a closed mesh)."""
+        return float(self._face_volumes().sum())
+
+    def _face_volumes(self) -> np.ndarray:
+        """Each face's share of the enclosed volume (the signed volume of
+        the tetrahedron it spans with the origin)."""
         a, b, c = (self.vertices[self.faces[:, i]].astype(np.float64) for i in range(3))
-        return float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
+        return np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+
+    def shells(self) -> tuple[np.ndarray, np.ndarray]:
+        """The mesh's closed surfaces: each face's shell number, and each
+        shell's signed volume: > 0 for a body (wound counter-clockwise seen
+        from outside), < 0 for a void inside one (its surface faces in)."""
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+        edges = np.concatenate([self.faces[:, [0, 1]], self.faces[:, [1, 2]]])
+        graph = coo_matrix((np.ones(len(edges), np.int8), edges.T.astype(np.int64)), shape=(len(self.vertices),) * 2)
+        count, of_vertex = connected_components(graph, directed=False)
+        of_face = of_vertex[self.faces[:, 0]]
+        volumes = np.bincount(of_face, self._face_volumes(), minlength=count)
+        used = np.bincount(of_face, minlength=count) > 0      # (vertices of no face make empty components)
+        renumber = np.cumsum(used) - 1
+        return renumber[of_face], volumes[used]
+
+    def solid(self, min_volume: float | None = None) -> tuple["Mesh", "ShellsRemoved"]:
+        """The mesh as one solid for printing: its largest body (or every
+        body of at least `min_volume` that lies outside the others), with
+        every internal void filled (its surface removed) and the other
+        bodies (loose specks, bodies inside the voids) removed; and what was
+        removed."""
+        of_face, volumes = self.shells()
+        bodies = np.flatnonzero(volumes > 0)
+        if len(bodies) == 0:
+            return self, ShellsRemoved(0, 0, 0, 0.0, 0.0)
+        largest = bodies[np.argmax(volumes[bodies])]
+        kept = [largest]
+        if min_volume is not None:
+            others = [b for b in bodies[np.argsort(-volumes[bodies])] if b != largest and volumes[b] >= min_volume]
+            for body in others:
+                # a body inside a kept one lies in a void of it, which is filled
+                point = self.vertices[self.faces[of_face == body][0, 0]].astype(np.float64)
+                if not any(_encloses(self.vertices[self.faces[of_face == k]].astype(np.float64), point)
+                           for k in kept):
+                    kept.append(body)
+        keep = np.isin(of_face, kept)
+        voids = volumes < 0
+        others = np.ones(len(volumes), bool)
+        others[kept] = False
+        others &= ~voids
+        removed = ShellsRemoved(len(kept), int(voids.sum()), int(others.sum()),
+                                float(-volumes[voids].sum()), float(volumes[others].sum()))
+        faces = self.faces[keep]
+        used = np.zeros(len(self.vertices), bool)
+        used[faces.ravel()] = True
+        renumber = (np.cumsum(used) - 1).astype(np.int32)
+        return Mesh(self.vertices[used], renumber[faces], self.normals[used]), removed
 
     def save(self, path: str) -> None:
         """Write binary STL, binary PLY or OBJ (by the extension), atomically."""
@@ -65,6 +120,59 @@ class Mesh:
             raise ValueError(f"a mesh is written as {', '.join(FORMATS)}, not {path}")
         with replacing(path) as temporary, open(temporary, "wb") as f:
             writer(self, f)
+
+
+class Shells(enum.Enum):
+    """What `fractalc mesh` writes: every closed surface the grid holds, or
+    one solid (`Mesh.solid`)."""
+    ALL = "all"
+    SOLID = "solid"
+
+    @staticmethod
+    def default_for(path: str) -> "Shells":
+        """One solid for the formats printers read, everything otherwise."""
+        return Shells.SOLID if _extension(path) in PRINTING_FORMATS else Shells.ALL
+
+
+@dataclass(frozen=True)
+class ShellsRemoved:
+    """What `Mesh.solid` kept and removed."""
+    kept: int             # bodies kept
+    voids: int            # internal voids filled
+    others: int           # the other bodies, removed: loose specks, bodies inside voids
+    void_volume: float    # the volume the filled voids add
+    others_volume: float  # the volume of the bodies removed
+
+    def summary(self) -> str:
+        if not self.voids and not self.others:
+            return f"one solid: {self.kept} {_plural(self.kept, 'body', 'bodies')}, nothing removed"
+        return (f"one solid: kept {self.kept} {_plural(self.kept, 'body', 'bodies')}; filled "
+                f"{self.voids} internal {_plural(self.voids, 'void', 'voids')} (volume {self.void_volume:.3g}), "
+                f"removed {self.others} other {_plural(self.others, 'body', 'bodies')} "
+                f"(volume {self.others_volume:.3g})")
+
+
+def _plural(count: int, one: str, many: str) -> str:
+    return one if count == 1 else many
+
+
+def _encloses(corners: np.ndarray, point: np.ndarray) -> bool:
+    """Whether the closed surface of (F, 3, 3) triangles encloses `point`:
+    a ray from it crosses the surface an odd number of times (Moeller and
+    Trumbore's ray-triangle test; the ray's direction is generic, so that
+    it meets no edge or vertex of a grid-aligned mesh)."""
+    direction = np.array([1.0, 0.0123, 0.0456])
+    a, ab, ac = corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    across = np.cross(direction, ac)
+    determinant = np.einsum("ij,ij->i", ab, across)
+    safe = np.where(determinant != 0, determinant, 1.0)
+    offset = point - a
+    u = np.einsum("ij,ij->i", offset, across) / safe
+    turned = np.cross(offset, ab)
+    v = (turned @ direction) / safe
+    t = np.einsum("ij,ij->i", ac, turned) / safe
+    crossing = (determinant != 0) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+    return bool(np.count_nonzero(crossing) % 2)
 
 
 def _extension(path: str) -> str:

@@ -11,6 +11,7 @@ from typing import Union
 from . import ir
 from .errors import Diagnostic, Span
 from .stdlib import Parameter, Signature
+from .write import DEFAULT_TONE_CURVE
 
 Vector3 = tuple[float, float, float]
 
@@ -59,7 +60,7 @@ class Coloring:
     near: ir.Vec
     far: ir.Vec
     trap: str                   # one of stdlib.TRAP_KINDS
-    scale: ir.Expr
+    scale: ir.Expr | None       # None: `auto`, spread over the trap's range (fractalc/lower.py)
     palette: tuple[ir.Vec, ir.Vec, ir.Vec, ir.Vec] | None = None   # a, b, c, d
 
 
@@ -258,7 +259,7 @@ class RenderSettings:
     normals: str = "tetrahedral"     # finite differences: tetrahedral (4 evaluations) or central (6)
     fast_math: str = "auto"          # on: native_ transcendental functions; auto: on CPUs
     exposure: float = 0.0            # stops: PNG colour times 2^exposure (EXR stays as rendered)
-    tonemap: str = "none"            # PNG tone curve: none (clip) | reinhard | aces
+    tonemap: str = DEFAULT_TONE_CURVE   # PNG tone curve: soft (a shoulder above 0.8) | none (clip) | reinhard | aces
     integrator: str = "direct"       # direct: Blinn-Phong and the effects; path: Monte Carlo path tracing
     bounces: int = 4                 # path: the most surface scatterings of a path
     environment: Environment | None = None   # path: the sky; None: the background everywhere

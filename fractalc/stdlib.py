@@ -216,20 +216,23 @@ TRANSFORMS = {
 
 # `.color(orbit_trap(...))`: a fractal coloured by how near its orbit comes
 # to the origin or the coordinate planes (Syntopia part II), from `near`
-# (trap distance 0) to `far` (trap distance >= 1 / scale); or by the steps
+# (trap distance 0) to `far` (trap distance >= 1 / scale; without a scale,
+# spread over the trap's range: fractalc/lower.py); or by the steps
 # its orbit took (`iterations`), or where the point is (`radius` |p|,
 # `height` p.z).
 TRAP_KINDS = ("origin", "x", "y", "z", "planes", "iterations", "radius", "height")
 _TRAP_WORDS = "word:" + "|".join(TRAP_KINDS)
+# `scale`'s default: spread the trap over its range (fractalc/lower.py, `_trap_parameter`)
+AUTO_SCALE = "auto"
 COLORINGS = {
     "orbit_trap": Signature("coloring", "orbit_trap", (
         _p("near", "vec3", (1.0, 0.85, 0.55), "0..1000"), _p("far", "vec3", (0.15, 0.25, 0.6), "0..1000"),
-        _p("trap", _TRAP_WORDS, "origin"), _p("scale", "num", 1.0, ">0"))),
+        _p("trap", _TRAP_WORDS, "planes"), _p("scale", "num", AUTO_SCALE, ">0"))),
     # Quilez's cosine palette a + b cos(2 pi (c t + d)) of t = trap * scale
     "palette": Signature("coloring", "palette", (
         _p("a", "vec3", (0.5, 0.5, 0.5)), _p("b", "vec3", (0.5, 0.5, 0.5)), _p("c", "vec3", (1.0, 1.0, 1.0)),
-        _p("d", "vec3", (0.0, 0.33, 0.67)), _p("trap", _TRAP_WORDS, "origin"),
-        _p("scale", "num", 1.0, ">0"))),
+        _p("d", "vec3", (0.0, 0.33, 0.67)), _p("trap", _TRAP_WORDS, "planes"),
+        _p("scale", "num", AUTO_SCALE, ">0"))),
 }
 
 # math function -> (arity, how arguments combine): "map" applies per

@@ -12,11 +12,13 @@ the anti-aliased render (`--samples N` for large N).
 """
 from __future__ import annotations
 
+import enum
 import math
 import os
 import sys
+import textwrap
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -435,23 +437,131 @@ def _open_window(viewer: Viewer):
     pygame.display.set_caption(f"fractalc view {viewer.path}")
     pygame.key.set_repeat(300, 50)     # a held [ or ] keeps stepping the param
     pygame.font.init()
-    return screen, pygame.font.SysFont("dejavusansmono,menlo,consolas,monospace", 14)
+    return screen, overlay_font(screen.get_size())
 
 
-def _text_block(screen, font, lines, topleft, color) -> None:
-    """Lines of text on a dark translucent panel."""
-    if not lines:
-        return
-    rendered = [font.render(line, True, color) for line in lines]
-    width = max(r.get_width() for r in rendered) + 8
-    height = sum(r.get_height() for r in rendered) + 6
-    panel = pygame.Surface((width, height), pygame.SRCALPHA)
+# The overlay's text: 14 px where the window has room for the help list
+# and the status line under it, smaller in smaller windows, never below
+# 8 px; what still does not fit is wrapped, then cut (and says so).
+FONT_PIXELS = (8, 14)
+FONT_NAMES = "dejavusansmono,menlo,consolas,monospace"
+PANEL_PADDING = (8, 6)        # a text panel's width and height beyond its text
+ERROR_COLOR, TEXT_COLOR = (255, 110, 100), (230, 230, 230)
+
+
+def overlay_font(size: tuple[int, int]):
+    """The overlay's monospace font for a window of `size` pixels: the
+    largest in FONT_PIXELS that shows the help list unwrapped, with a line
+    to spare for the status."""
+    width, height = size
+    widest = max(HELP, key=len)
+    for pixels in range(FONT_PIXELS[1], FONT_PIXELS[0], -1):
+        font = pygame.font.SysFont(FONT_NAMES, pixels)
+        if (font.size(widest)[0] + PANEL_PADDING[0] <= width
+                and font.get_linesize() * (len(HELP) + 1) + 2 * PANEL_PADDING[1] <= height):
+            return font
+    return pygame.font.SysFont(FONT_NAMES, FONT_PIXELS[0])
+
+
+@dataclass(frozen=True)
+class TextBlock:
+    """Lines of the overlay on a panel at `topleft`."""
+    lines: tuple[str, ...]
+    topleft: tuple[int, int]
+    color: tuple[int, int, int]
+
+    def size(self, font) -> tuple[int, int]:
+        if not self.lines:
+            return 0, 0
+        return (max(font.size(line)[0] for line in self.lines) + PANEL_PADDING[0],
+                font.get_linesize() * len(self.lines) + PANEL_PADDING[1])
+
+
+def _columns(font, width: int) -> int:
+    return max(1, (width - PANEL_PADDING[0]) // max(1, font.size("M")[0]))
+
+
+def fitted(font, lines, width: int, height: int) -> tuple[str, ...]:
+    """`lines` wrapped to panels `width` pixels wide (continuations
+    indented) and cut to `height`: a cut block ends with how many lines did
+    not fit."""
+    columns = _columns(font, width)
+    rows = max(0, (height - PANEL_PADDING[1]) // font.get_linesize())
+    wrapped = [piece for line in lines
+               for piece in (textwrap.wrap(line, columns, subsequent_indent="  ", drop_whitespace=False,
+                                           break_on_hyphens=False) or [""])]
+    if len(wrapped) <= rows:
+        return tuple(wrapped)
+    if rows == 0:
+        return ()
+    left = len(wrapped) - (rows - 1)
+    return (*wrapped[:rows - 1], f"... {left} more line{'s' if left != 1 else ''}"[:columns])
+
+
+def _error_lines(error: str, columns: int) -> list[str]:
+    """A scene error's lines for a panel `columns` wide: its message as it
+    is (to be wrapped), and its source line and caret line (a line of
+    carets under it) cut alike to a window of columns around the carets,
+    so that the carets still point at their place."""
+    lines = error.splitlines()
+    out = []
+    for i, text in enumerate(lines):
+        caret = text.strip() and set(text.strip()) <= {"^"}
+        if caret and out and out[-1] == lines[i - 1] and len(max(text, lines[i - 1], key=len)) > columns:
+            first = min(text.index("^"), max(0, len(text.rstrip()) - columns))
+            out[-1], text = lines[i - 1][first:first + columns], text[first:first + columns]
+        out.append(text)
+    return out
+
+
+class Panel(enum.Enum):
+    """The overlay's panels, in the order they are drawn."""
+    STATUS = "status"
+    MESSAGE = "message"
+    ERROR = "error"
+    PARAMS = "params"
+    HELP = "help"
+
+
+def overlay(viewer: "Viewer", size: tuple[int, int], font) -> dict[Panel, TextBlock]:
+    """What the window shows over the image, fitted to it: the status line
+    at the bottom and a passing message over it, the scene's error at the
+    top, the params under it, and the help list over them; room goes first
+    to the status, then the error, the message and the params."""
+    width, height = size
+    line = font.get_linesize()
+
+    def tall(lines):
+        return line * len(lines) + PANEL_PADDING[1] if lines else 0
+
+    status = fitted(font, [viewer.status() + ("" if viewer.show_help else " | H: help")], width, height)
+    room = height - tall(status)
+    errors = fitted(font, _error_lines(viewer.error, _columns(font, width)), width, room) if viewer.error else ()
+    message = fitted(font, [viewer.message], width, room - tall(errors)) if viewer.message else ()
+    params = fitted(font, viewer.param_lines(), width, room - tall(errors) - tall(message))
+    blocks = {Panel.STATUS: TextBlock(status, (0, height - tall(status)), TEXT_COLOR),
+              Panel.MESSAGE: TextBlock(message, (0, room - tall(message)), TEXT_COLOR),
+              Panel.ERROR: TextBlock(errors, (0, 0), ERROR_COLOR),
+              Panel.PARAMS: TextBlock(params, (0, tall(errors)), TEXT_COLOR)}
+    if viewer.show_help:
+        # a sixth of the way in where it fits there whole, else from the corner
+        corner = (width // 6, height // 6)
+        help_lines = fitted(font, HELP, width - corner[0], room - corner[1])
+        if help_lines != HELP:
+            corner, help_lines = (0, 0), fitted(font, HELP, width, room)
+        blocks[Panel.HELP] = TextBlock(help_lines, corner, TEXT_COLOR)
+    return {panel: block for panel, block in blocks.items() if block.lines}
+
+
+def _text_block(screen, font, block: TextBlock) -> None:
+    """A block's lines on a dark translucent panel."""
+    panel = pygame.Surface(block.size(font), pygame.SRCALPHA)
     panel.fill((0, 0, 0, 170))
-    screen.blit(panel, topleft)
-    y = topleft[1] + 3
-    for r in rendered:
-        screen.blit(r, (topleft[0] + 4, y))
-        y += r.get_height()
+    screen.blit(panel, block.topleft)
+    x, y = block.topleft[0] + PANEL_PADDING[0] // 2, block.topleft[1] + PANEL_PADDING[1] // 2
+    for text in block.lines:
+        screen.blit(font.render(text, True, block.color), (x, y))
+        y += font.get_linesize()
 
 
 def _image_surface(viewer: Viewer, size: tuple[int, int]):
@@ -461,20 +571,10 @@ def _image_surface(viewer: Viewer, size: tuple[int, int]):
 
 
 def _draw(screen, font, image, viewer: Viewer) -> None:
-    """The image, then the error, the params, the help and the status line over it."""
+    """The image, then the overlay's text over it."""
     screen.blit(image, (0, 0))
-    line = font.get_linesize()
-    top = 0
-    if viewer.error:
-        errors = viewer.error.splitlines()[:8]
-        _text_block(screen, font, errors, (0, 0), (255, 110, 100))
-        top = line * len(errors) + 8
-    _text_block(screen, font, viewer.param_lines(), (0, top), (230, 230, 230))
-    if viewer.show_help:
-        _text_block(screen, font, list(HELP), (screen.get_width() // 6, screen.get_height() // 6), (230, 230, 230))
-    bottom = [viewer.message] if viewer.message else []
-    bottom.append(viewer.status() + ("" if viewer.show_help else " | H: help"))
-    _text_block(screen, font, bottom, (0, screen.get_height() - line * len(bottom) - 6), (230, 230, 230))
+    for block in overlay(viewer, screen.get_size(), font).values():
+        _text_block(screen, font, block)
     pygame.display.flip()
 
 

@@ -39,15 +39,26 @@ MATRICES = {"worldtocamera": "worldToCamera", "worldtoNDC": "worldToNDC"}
 FLOAT_ONLY = ("Z", "P.x", "P.y", "P.z")
 
 
-TONE_CURVES = ("none", "reinhard", "aces")
+TONE_CURVES = ("soft", "none", "reinhard", "aces")
+DEFAULT_TONE_CURVE = "soft"
+# `soft` is the identity up to SOFT_KNEE and a shoulder above it that
+# reaches 1 only at infinity: a floor lit a little past 1 (ambient plus a
+# light facing it: 1.0 for albedo 0.8) keeps its shading instead of
+# clipping to pure white, and everything darker is shown as `none` shows it.
+SOFT_KNEE = 0.8
 
 
-def tone_mapped(linear: np.ndarray, exposure: float = 0.0, curve: str = "none") -> np.ndarray:
+def tone_mapped(linear: np.ndarray, exposure: float = 0.0, curve: str = DEFAULT_TONE_CURVE) -> np.ndarray:
     """Scene-linear colour as display-linear colour in [0, 1]: scaled by
-    2^exposure, then through the tone curve (none: clipped; reinhard:
-    x / (1 + x) per channel; aces: Narkowicz's fit of the ACES film curve)."""
+    2^exposure, then through the tone curve (soft: x up to SOFT_KNEE, then
+    an exponential shoulder toward 1; none: clipped; reinhard: x / (1 + x)
+    per channel; aces: Narkowicz's fit of the ACES film curve)."""
     x = np.maximum(linear * np.float32(2.0 ** exposure), 0.0)
-    if curve == "reinhard":
+    if curve == "soft":
+        room = 1.0 - SOFT_KNEE
+        shoulder = SOFT_KNEE + room * -np.expm1(-(x - SOFT_KNEE) / room)
+        x = np.where(x > SOFT_KNEE, shoulder, x).astype(x.dtype)
+    elif curve == "reinhard":
         x = x / (1.0 + x)
     elif curve == "aces":
         x = x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14)
@@ -214,7 +225,7 @@ def write(path: str, planes: dict[str, np.ndarray], metadata: dict[str, str], ha
         spec.attribute(name, value)
     spec.attribute("Software", f"fractalc {metadata.get('version', '')}".strip())
     transparent = metadata.get("render.background") == "transparent"
-    exposure, curve = float(metadata.get("render.exposure", 0.0)), metadata.get("render.tonemap", "none")
+    exposure, curve = float(metadata.get("render.exposure", 0.0)), metadata.get("render.tonemap", DEFAULT_TONE_CURVE)
     pixels = _interleaved(planes) if exr else _srgb_rgba(planes, bits, transparent, exposure, curve)
     with replacing(path) as temporary:
         output = oiio.ImageOutput.create(temporary)

@@ -148,17 +148,33 @@ def _lipschitz(g):
     return (g + np.sqrt(g * g + 4)) / 2
 
 
-def twist(p, s, rate):
+def _held(p, warped, axis_point, held_in):
+    """A warp's estimate with the sphere that holds the shape (radius
+    `held_in` about `axis_point`, a point of the warp's axis, which the warp
+    keeps every point's distance to): the sphere's distance where it is at
+    least its radius, else the larger of the two (both are lower bounds of
+    the distance). Without such a sphere (an unbounded shape), the warped
+    estimate alone."""
+    if held_in is None:
+        return warped
+    sphere = _length(p - np.asarray(axis_point, dtype=np.float64)) - held_in
+    return np.where(sphere < held_in, np.maximum(warped, sphere), sphere)
+
+
+def twist(p, s, rate, held_in=None, axis_point=(0.0, 0.0, 0.0)):
+    """Twist about z; `held_in`: the radius of a sphere about `axis_point`
+    (on the z axis) that holds the shape."""
     x, y, z = p.T
     a = rate * z
     c, n = np.cos(a), np.sin(a)
     q = np.stack([c * x + n * y, -n * x + c * y, z], axis=1)
-    return s(q) / _lipschitz(abs(rate) * np.hypot(x, y))
+    return _held(p, s(q) / _lipschitz(abs(rate) * np.hypot(x, y)), axis_point, held_in)
 
 
-def bend(p, s, rate):
+def bend(p, s, rate, held_in=None, axis_point=(0.0, 0.0, 0.0)):
+    """Bend in the xz plane; `held_in`: as for twist, about a point of the y axis."""
     x, y, z = p.T
     a = rate * x
     c, n = np.cos(a), np.sin(a)
     q = np.stack([c * x - n * z, y, n * x + c * z], axis=1)
-    return s(q) / _lipschitz(abs(rate) * np.hypot(x, z))
+    return _held(p, s(q) / _lipschitz(abs(rate) * np.hypot(x, z)), axis_point, held_in)

@@ -119,8 +119,9 @@ def test_animate_frames_option_renders_one_frame_or_a_clamped_range(scene_file, 
 
 
 def test_animate_writes_an_mp4_of_the_frames(scene_file, tmp_path):
-    imageio = pytest.importorskip("imageio.v2")
-    pytest.importorskip("imageio_ffmpeg")
+    # both in the test extra: a missing one fails here, it does not skip
+    import imageio.v2 as imageio
+    import imageio_ffmpeg  # noqa: F401
     result = fractalc_cli("animate", scene_file, "-o", "f%d.exr", "--fps", 4, "--mp4", "fly.mp4", "-q",
                           cwd=tmp_path)
     assert result.returncode == 0, result.stderr

@@ -303,6 +303,11 @@ HOSTILE = {
     "operator chain": "'scene ' + '1-' * (N // 2) + '1'",
     "bad lines": "'let = \\n' * (N // 7)",
 }
+# CPU seconds each may take in the child (its own process time, so that a
+# loaded machine does not fail it): measured 1.8-2.3 s for the minus signs
+# and 0.015-0.08 s for the others (three runs, 2-core EPYC, with a test
+# process beside them); once minutes for the first two
+HOSTILE_SECONDS = {"minus signs": 5.0, "open brackets": 0.5, "operator chain": 0.5, "bad lines": 0.5}
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="peak RSS from /proc/self/status")
@@ -313,11 +318,11 @@ import json, time, fractalc
 N = 1_000_000
 out = {{}}
 for name, text in {{{', '.join(f'{k!r}: {v}' for k, v in HOSTILE.items())}}}.items():
-    start = time.perf_counter()
+    start = time.process_time()
     try:
         fractalc.loads(text)
     except fractalc.SceneError as error:
-        out[name] = [time.perf_counter() - start, error.line, error.message]
+        out[name] = [time.process_time() - start, error.line, error.message]
 # the child's own peak (getrusage's ru_maxrss keeps the test runner's across exec)
 out['peak_mib'] = next(int(l.split()[1]) for l in open('/proc/self/status') if l.startswith('VmHWM:')) / 1024
 print(json.dumps(out))
@@ -326,7 +331,7 @@ print(json.dumps(out))
     measured = json.loads(result.stdout)
     for name in HOSTILE:
         seconds, line, message = measured[name]
-        assert seconds < 5, (name, seconds)         # was minutes and GBs for the first two
+        assert seconds < HOSTILE_SECONDS[name], (name, seconds)
     assert measured["peak_mib"] < 400
     assert measured["minus signs"][2] == measured["open brackets"][2] == "nesting deeper than 256 levels"
 
@@ -334,9 +339,10 @@ print(json.dumps(out))
 def test_many_errors_on_a_long_source_cost_linear_time():
     lines = 20_000
     source = "let = 1\n" * lines
-    start = time.perf_counter()
+    start = time.process_time()
     shown = [str(diagnostic("f", source, Span(i, 5, i, 6), "bad")) for i in range(1, lines + 1)]
-    assert time.perf_counter() - start < 3      # quadratic (a split per error) took ~10 s
+    # CPU time: measured 0.25-0.33 s in five runs; quadratic (a split per error) took ~10 s
+    assert time.process_time() - start < 1
     assert shown[-1] == f"f:{lines}:5: error: bad\n    let = 1\n        ^"
 
 
@@ -347,9 +353,9 @@ def test_line_break_definition_is_the_documented_one():
 def best_parse_seconds(text: str) -> float:
     times = []
     for _ in range(2):
-        start = time.perf_counter()
+        start = time.process_time()
         parse(text)
-        times.append(time.perf_counter() - start)
+        times.append(time.process_time() - start)
     return min(times)
 
 
@@ -359,4 +365,6 @@ def test_long_lists_parse_in_linear_time(item):
         items = "".join(item.format(i=i) for i in range(n))
         return items + "scene sphere()" if item.startswith("let") else f"scene union({items}sphere())"
     ratio = best_parse_seconds(scene(4000)) / best_parse_seconds(scene(1000))
-    assert ratio < 8, ratio     # 4 when linear; 16 when each item costs the ones before it
+    # 4 when linear; 16 when each item costs the ones before it; in CPU
+    # time, measured 2.5-3.3 (declarations) and 4.5-4.7 (arguments) in five runs
+    assert ratio < 8, ratio

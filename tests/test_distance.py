@@ -31,6 +31,10 @@ C, REF_C = (
 BOX, REF_BOX = "box((1, 2, 0.5))", S(ref.box, (1, 2, 0.5))
 
 
+def half_diagonal(size):
+    return 0.5 * float(np.linalg.norm(size))
+
+
 def case(text, expected, params=None):
     name = text.replace("\n", "; ") + (f" {params}" if params else "")
     return pytest.param(text, params, expected, id=name)
@@ -94,10 +98,17 @@ CASES = [
     case("scene sphere(1.2).onion(0.1)", S(ref.onion, S(ref.sphere, 1.2), 0.1)),
     case(f"scene ({A} - {B}).onion(0.1).round(0.05)",
          S(ref.round_, S(ref.onion, S(ref.subtract, REF_A, REF_B), 0.1), 0.05)),
-    case("scene box((1, 1, 3)).twist(0.8)", S(ref.twist, S(ref.box, (1, 1, 3)), 0.8)),
-    case(f"scene {BOX}.twist(-1.5)", S(ref.twist, REF_BOX, -1.5)),
-    case("scene box((3, 0.5, 0.5)).bend(0.6)", S(ref.bend, S(ref.box, (3, 0.5, 0.5)), 0.6)),
-    case(f"scene {C}.bend(-0.3)", S(ref.bend, REF_C, -0.3)),
+    # (held in the sphere about the origin through a box's corners, or a torus's outer rim)
+    case("scene box((1, 1, 3)).twist(0.8)", S(ref.twist, S(ref.box, (1, 1, 3)), 0.8, half_diagonal((1, 1, 3)))),
+    case(f"scene {BOX}.twist(-1.5)", S(ref.twist, REF_BOX, -1.5, half_diagonal((1, 2, 0.5)))),
+    case("scene box((3, 0.5, 0.5)).bend(0.6)",
+         S(ref.bend, S(ref.box, (3, 0.5, 0.5)), 0.6, half_diagonal((3, 0.5, 0.5)))),
+    case(f"scene {C}.bend(-0.3)", S(ref.bend, REF_C, -0.3, 1.3)),
+    # off the axis: the sphere about the axis point nearest the shape's
+    # centre, through the shape's farthest point from it
+    case("scene box(0.6).translate((1, 0.5, 2)).twist(0.7)",
+         S(ref.twist, S(ref.translate, S(ref.box, 0.6), (1, 0.5, 2)), 0.7,
+           np.hypot(1, 0.5) + half_diagonal((0.6, 0.6, 0.6)), (0, 0, 2))),
     # ---- material and colour leave the distance alone
     case(f"scene {A}.color((1, 0, 0))", REF_A),
     case(f"material m {{ color: (1, 0.5, 0) }}\nscene {BOX}.material(m) | {A}.color((0, 1, 0))",
@@ -109,7 +120,8 @@ CASES = [
          S(ref.twist, S(ref.repeat, S(ref.union, S(ref.translate, S(ref.sphere, 0.5), (1, 0, 0)),
                                       S(ref.box, 0.6)), (3, 3, 0)), 0.4)),
     case(f"scene {BOX}.twist(0.5).rotate((0, 1, 1), 45).bend(0.2)",
-         S(ref.bend, S(ref.rotate, S(ref.twist, REF_BOX, 0.5), (0, 1, 1), 45), 0.2)),
+         S(ref.bend, S(ref.rotate, S(ref.twist, REF_BOX, 0.5, half_diagonal((1, 2, 0.5))), (0, 1, 1), 45), 0.2,
+           half_diagonal((1, 2, 0.5)))),
     # ---- let and param in arguments
     case("let r = 0.6\nlet s = sphere(r * 2)\nscene s.translate((0, 0, r))",
          S(ref.translate, S(ref.sphere, 1.2), (0, 0, 0.6))),

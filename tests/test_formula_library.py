@@ -22,7 +22,9 @@ from fractalc.emit import double_literals, function_source
 from fractalc.parse import parse
 
 POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
-TOLERANCE = {"float": 2e-4, "double": 1e-9}       # 95th percentile of the relative error
+# 95th percentile of the relative error; float: measured at most 4.0e-5
+# (PoCL) and 8.3e-5 (Intel's runtime), both kifs_icosahedral
+TOLERANCE = {"float": 2e-4, "double": 1e-9}
 FLOOR = 1e-3                                      # relative to max(|reference|, FLOOR)
 
 

@@ -141,7 +141,8 @@ def _numpy_box(z):
     return z * fold[:, None] * 2, 2 * fold
 
 
-@pytest.mark.parametrize("precision, tolerance", [("float", 1e-3), ("double", 1e-9)])
+# p99 measured 4.4e-6 (PoCL) and 5.5e-6 (Intel's runtime) in float, 6.3e-15 in double
+@pytest.mark.parametrize("precision, tolerance", [("float", 2e-5), ("double", 1e-9)])
 def test_a_hybrid_estimate_in_the_kernel_matches_its_float64_meaning(precision, tolerance):
     estimate = orbit(HYBRID).distance
     points = RNG.uniform(-1.5, 1.5, (256, 3))

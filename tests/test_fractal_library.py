@@ -17,7 +17,15 @@ from fractalc.stdlib import library
 
 LANES = (1, 8)
 PRECISIONS = ("float", "double")
-TOLERANCE = {"float": 1e-3, "double": 1e-9}    # 99th percentile of the relative error
+# The 99th percentile of the relative error a fractal's estimate may have:
+# in float, three times the largest measured over its cases here and in
+# test_fractals.py, with pip's PoCL and with Intel's CPU runtime
+# (mandelbulb 1.9e-4: power 16 with 8 lanes on Intel, 1.2e-4 on PoCL;
+# mandelbox 1.7e-4; menger 3.0e-5; julia 1.9e-5; sierpinski 2.1e-6), so
+# that an estimate 0.08% off (0.5004 for the Mandelbulb's 0.5) fails; in
+# double 1e-9 (measured at most 5.5e-13).
+FLOAT_TOLERANCE = {"mandelbulb": 6e-4, "mandelbox": 6e-4, "menger": 1e-4, "julia": 6e-5, "sierpinski": 1e-5}
+DOUBLE_TOLERANCE = 1e-9
 FLOOR = 1e-3                                   # relative to max(|reference|, FLOOR)
 SLACK = {"float": 1e-5, "double": 1e-12}       # lower bounds may exceed the truth by this
 
@@ -125,6 +133,10 @@ def bound_radius(name, lanes=1, precision="float", **kwargs):
     return float(out[0])
 
 
+def tolerance(name: str, precision: str) -> float:
+    return FLOAT_TOLERANCE[name] if precision == "float" else DOUBLE_TOLERANCE
+
+
 def ball(count, radius, seed=20240607):
     """`count` seeded points uniform in the ball of `radius`."""
     rng = np.random.default_rng(seed)
@@ -182,7 +194,7 @@ def test_escape_time_fractal_matches_reference(name, kwargs, lanes, precision):
     d = evaluate(name, points, lanes, precision, **kwargs)
     assert np.isfinite(d).all()
     error = np.percentile(relative_error(d, expected), 99)
-    assert error < TOLERANCE[precision], f"99th percentile relative error {error:.3g}"
+    assert error < tolerance(name, precision), f"99th percentile relative error {error:.3g}"
 
 
 # ---------------------------------------------------------------- exact solids: lower bounds

@@ -20,7 +20,7 @@ import pytest
 import fractalc
 import reference_fractals as ref
 from fractalc import build as build_module
-from test_fractal_library import TOLERANCE, ball, relative_error, shell
+from test_fractal_library import ball, relative_error, shell, tolerance
 
 PRECISIONS = ("float", "double")
 SQRT3 = np.sqrt(3.0)
@@ -184,7 +184,7 @@ def test_default_fractal_matches_reference(name, precision, driver):
     assert np.isfinite(d).all()
     error = p99(d, reference_de(name, points))
     print(f"\nFIGURE default {name} {precision}: p99 relative error {error:.3g}")
-    assert error < TOLERANCE[precision]
+    assert error < tolerance(name, precision)
 
 
 # (fractal, argument, three settings: the file's param value, one given by
@@ -235,7 +235,7 @@ def _check_against_reference(name, argument, value, distance, precision, label):
     assert np.isfinite(d).all()
     error = p99(d, reference_de(name, points, **kwargs))
     print(f"\nFIGURE {name} {argument}={value} ({label}) {precision}: p99 relative error {error:.3g}")
-    assert error < TOLERANCE[precision], f"{argument} = {value} ({label}): p99 relative error {error:.3g}"
+    assert error < tolerance(name, precision), f"{argument} = {value} ({label}): p99 relative error {error:.3g}"
 
 
 @pytest.mark.parametrize("precision", PRECISIONS)
@@ -397,7 +397,7 @@ def test_outside_the_bound_is_the_bounding_sphere_distance(name, kwargs, precisi
     near = shell(3000, radius * 0.5, limit * (1 - 1e-5), 6)
     d = s.distance(near)
     expected = reference_de(name, near, **kwargs)
-    assert p99(d, expected) < TOLERANCE[precision]
+    assert p99(d, expected) < tolerance(name, precision)
     sphere = np.linalg.norm(near, axis=1) - radius
     differs = np.abs(expected - sphere) > 1e-2 * np.maximum(np.abs(sphere), 1e-3)
     assert differs.mean() > 0.5, "the DE looks like the bounding sphere's distance in the margin"
@@ -429,7 +429,7 @@ def test_the_bound_moves_and_scales_with_the_shape(name, transform, local, facto
     local_near = ball(3000, radius, 9)
     world_near = _to_world(local, local_near)
     d = s.distance(world_near)
-    assert p99(d / factor, reference_de(name, local(world_near))) < TOLERANCE["float"]
+    assert p99(d / factor, reference_de(name, local(world_near))) < tolerance(name, "float")
 
 
 def _to_world(local, points):
@@ -616,8 +616,11 @@ def test_depth_map_matches_a_numpy_sphere_tracer(name, driver):
     assert 0.1 < expected_hit.mean() < 0.9, "the camera should see the fractal and the background"
     assert agreement >= 0.99
     # both stop within epsilon of the surface, on the same side of it
+    # (measured: medians 0.12-0.52 epsilon, 99th percentiles 0.9-1.7, on
+    # PoCL and Intel's runtime; where a march stops is no test of an
+    # estimate's last digits: the distance tests above are)
     assert np.median(difference) < TRACE["epsilon"]
-    assert np.percentile(difference, 99) < 5 * TRACE["epsilon"]
+    assert np.percentile(difference, 99) < 3.5 * TRACE["epsilon"]
 
 
 # ---------------------------------------------------------------- 5. orbit traps
@@ -695,6 +698,31 @@ def test_orbit_trap_colour_lies_between_near_and_far_and_follows_the_trap():
     print(f"\nFIGURE orbit trap: mix weight vs numpy trap at the hit points: median {np.median(difference):.2g}, "
           f"p90 {np.percentile(difference, 90):.2g}")
     assert np.median(difference) < 1e-2 and np.percentile(difference, 90) < 0.1
+
+
+def test_orbit_trap_defaults_spread_the_colour_over_the_fractal():
+    # trap and scale left to their defaults: the nearest plane's distance,
+    # t = 1 + ln(trap) / 5 (lower.TRAP_DECADES). The default was once the
+    # origin trap at scale 1: t = 1 (all `far`) on every Mandelbulb and
+    # Mandelbox pixel.
+    weights = {}
+    for name in ("mandelbulb", "mandelbox"):
+        camera = CAMERAS[name]
+        near, far = (f"({', '.join(map(str, colour))})" for colour in (NEAR, FAR))
+        text = camera_scene(f"scene {name}().color(orbit_trap(near: {near}, far: {far}))\n{DARK}",
+                            camera, extra=", background: (0, 0, 0)")
+        image = scene(text).render(width=W, height=H)
+        hit, albedo = _albedo(image)
+        weights[name] = ((albedo - NEAR) / (FAR - NEAR)).mean(axis=1)
+        assert hit.mean() > 0.1
+        low, high = np.percentile(weights[name], [5, 95])
+        assert high - low > 0.5, (name, low, high)
+        if name == "mandelbulb":
+            origin, dirs = primary_rays(camera["position"], fov=camera["fov"])
+            points = origin + dirs[hit] * image.depth[hit][:, None]
+            expected = np.clip(1 + np.log(mandelbulb_trap(points, "planes")) / 5, 0, 1)
+            difference = np.abs(weights[name] - expected)
+            assert np.median(difference) < 1e-2 and np.percentile(difference, 90) < 0.1
 
 
 def test_orbit_trap_colours_and_scale_change_the_image_as_predicted_without_rebuilding():

@@ -92,7 +92,9 @@ def test_a_megabyte_scene_parses_in_seconds():
     args = scene.shape.args
     assert len(args) == (len(text) - len("scene union(box(2))\n")) // len("sphere(), ") + 1
     assert args[-1].span.column == len(text) - len("box(2))\n") + 1
-    assert seconds < 3, f"1 MB took {seconds:.2f} s"
+    # CPU time: measured 2.41-2.56 s in four runs (2-core EPYC, with a test
+    # process beside it), so 3 s left a margin of 1.17
+    assert seconds < 6, f"1 MB took {seconds:.2f} s"
 
 
 def test_a_megabyte_chain_of_unions_parses_in_seconds():
@@ -110,7 +112,8 @@ def test_parse_time_grows_linearly():
     small, large = let_lines(1 << 18), let_lines(1 << 20)
     small_seconds = sorted(parse_seconds(small) for _ in range(3))[1]
     large_seconds = parse_seconds(large)
-    assert large_seconds < 6 * small_seconds, (small_seconds, large_seconds)
+    # 4 when linear, 16 when quadratic; measured 3.5-4.9 in four runs (6 was a margin of 1.2)
+    assert large_seconds < 8 * small_seconds, (small_seconds, large_seconds)
 
 
 def test_a_mistake_at_the_end_of_a_large_file_is_lark_error_at_its_place():
@@ -121,7 +124,7 @@ def test_a_mistake_at_the_end_of_a_large_file_is_lark_error_at_its_place():
     start = time.process_time()
     with pytest.raises(fractalc.SceneError) as error:
         parse(valid + mistake)
-    assert time.process_time() - start < 3
+    assert time.process_time() - start < 3      # CPU time: measured 1.15-1.39 s in four runs
     assert alone.value.line == 2 and alone.value.message.startswith("unexpected '*'")
     assert (error.value.line, error.value.column, error.value.message) == \
         (valid.count("\n") + 2, alone.value.column, alone.value.message)

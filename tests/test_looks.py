@@ -5,12 +5,15 @@ formula, and cosine palettes driven by the orbit trap (read through the
 albedo pass). Renders are 16 x 12 to 48 x 32."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import OpenImageIO as oiio
 import pytest
 
 import fractalc
+
+REPO = Path(__file__).resolve().parents[1]
 
 SCENE = """
 scene sphere(0.3)
@@ -34,7 +37,8 @@ def corner(path) -> np.ndarray:
     ({}, 0.2),
     ({"exposure": 1}, 0.4),
     ({"exposure": -2}, 0.05),
-    ({"exposure": 3}, 1.0),                                           # 1.6: clipped
+    ({"exposure": 3, "tonemap": "none"}, 1.0),                        # 1.6: clipped
+    ({"exposure": 3}, 0.8 + 0.2 * (1 - np.exp(-(1.6 - 0.8) / 0.2))),  # the default's shoulder
     ({"tonemap": "reinhard"}, 0.2 / 1.2),
     ({"tonemap": "reinhard", "exposure": 3}, 1.6 / 2.6),              # no longer clipped
     ({"tonemap": "aces"}, 0.2 * (2.51 * 0.2 + 0.03) / (0.2 * (2.43 * 0.2 + 0.59) + 0.14)),
@@ -52,15 +56,39 @@ def test_tone_curves_keep_order_and_roll_highlights_off():
     from fractalc.write import tone_mapped
     radiance = np.geomspace(1e-3, 1e3, 200)
     reinhard, aces = tone_mapped(radiance, 0.0, "reinhard"), tone_mapped(radiance, 0.0, "aces")
-    for shown in (reinhard, aces):
+    soft = tone_mapped(radiance, 0.0, "soft")
+    for shown in (reinhard, aces, soft):
         assert np.all(np.diff(shown) >= 0) and shown[0] > 0
+    # the default: as rendered up to its knee, then a shoulder below white
+    assert np.array_equal(soft[radiance <= 0.8], radiance[radiance <= 0.8])
+    assert soft[radiance < 5].max() < 1.0 and np.all(np.diff(soft[(radiance > 0.8) & (radiance < 3)]) > 0)
     assert reinhard.max() < 1.0, "Reinhard never reaches white"
     # the ACES fit reaches white at 7.245 (0.08 x^2 - 0.56 x - 0.14 = 0)
     assert np.all(aces[radiance > 7.25] == 1.0) and np.all(aces[radiance < 7.24] < 1.0)
 
 
+def test_floors_under_the_example_lights_keep_their_shading(tmp_path):
+    # examples/primitives.frac: its floor (albedo 0.75) under a sun and a
+    # blue point light, ambient 0.25: linear values up to 1.1. Clipped at
+    # 1 (the old default) 17% of the floor's pixels were pure white in the
+    # PNG; the default tone curve's shoulder keeps them below it.
+    scene = fractalc.load(REPO / "examples" / "primitives.frac")
+    image = scene.render(width=64, height=48, aovs=["P"])
+    floor = np.isfinite(image.depth) & (image.normal[..., 2] > 0.99) & (image.passes["P"][..., 2] < 0.2)
+    assert floor.sum() > 1000
+    clipped = {}
+    for curve in ("soft", "none"):
+        image.metadata["render.tonemap"] = curve
+        image.save(str(tmp_path / f"{curve}.png"))
+        file = oiio.ImageInput.open(str(tmp_path / f"{curve}.png"))
+        codes = np.asarray(file.read_image(oiio.UINT8))[..., :3]
+        file.close()
+        clipped[curve] = (codes[floor] == 255).any(axis=-1).mean()
+    assert clipped["soft"] == 0 and clipped["none"] > 0.1, clipped
+
+
 @pytest.mark.parametrize("entry, message", [
-    ("tonemap: filmic", "'tonemap' must be 'none' or 'reinhard' or 'aces'"),
+    ("tonemap: filmic", "'tonemap' must be 'soft' or 'none' or 'reinhard' or 'aces'"),
     ("exposure: 25", "'exposure' of 'render' must be between -20 and 20, not 25"),
 ])
 def test_bad_tone_keys_are_errors_at_the_value(entry, message):

@@ -85,6 +85,81 @@ def test_fractal_estimate_meshes_as_one_solid():
     assert sizes.max() > 0.9 * len(mesh.vertices)
 
 
+# A ball with a cavity (radius 0.5) holding a smaller ball (an island in
+# the void), and a loose ball beside it: four closed surfaces.
+HOLLOW_BALL = ("scene union(subtract(sphere(1), sphere(0.5)), sphere(0.3), "
+               "sphere(0.25).translate((1.6, 0, 0)))\n")
+
+
+def ball(radius):
+    return 4 / 3 * np.pi * radius ** 3
+
+
+@pytest.fixture(scope="module")
+def hollow_ball_mesh():
+    return fractalc.loads(HOLLOW_BALL).mesh(resolution=64)
+
+
+def test_shells_are_the_bodies_and_voids_with_their_volumes(hollow_ball_mesh):
+    _, volumes = hollow_ball_mesh.shells()
+    # sorted: the void (wound inwards: negative), the island, the loose ball, the hollow ball
+    expected = [-ball(0.5), ball(0.25), ball(0.3), ball(1)]
+    assert np.sort(volumes) == pytest.approx(sorted(expected), rel=0.03)
+
+
+def test_solid_keeps_the_largest_body_with_its_voids_filled(hollow_ball_mesh):
+    solid, removed = hollow_ball_mesh.solid()
+    assert (removed.kept, removed.voids, removed.others) == (1, 1, 2)
+    assert removed.void_volume == pytest.approx(ball(0.5), rel=0.03)
+    assert removed.others_volume == pytest.approx(ball(0.3) + ball(0.25), rel=0.03)
+    assert solid.volume() == pytest.approx(ball(1), rel=0.01)
+    assert len(solid.shells()[1]) == 1 and np.all(edge_uses(solid.faces) == 2)
+    assert directed_edges_unique(solid.faces)
+    # only the vertices of the faces kept, with their normals
+    assert np.array_equal(np.unique(solid.faces), np.arange(len(solid.vertices)))
+    assert len(solid.normals) == len(solid.vertices)
+    assert np.einsum("ij,ij->i", solid.normals, solid.vertices / np.linalg.norm(solid.vertices, axis=1,
+                                                                                   keepdims=True)).min() > 0.99
+
+
+def test_solid_with_a_minimum_volume_keeps_loose_bodies_but_not_those_inside_a_void(hollow_ball_mesh):
+    # the island (0.113) is above the minimum too, but lies in the filled cavity
+    solid, removed = hollow_ball_mesh.solid(min_volume=0.05)
+    assert (removed.kept, removed.voids, removed.others) == (2, 1, 1)
+    assert solid.volume() == pytest.approx(ball(1) + ball(0.25), rel=0.01)
+    assert removed.others_volume == pytest.approx(ball(0.3), rel=0.03)
+
+
+def test_the_mandelbulb_meshes_to_one_solid():
+    # its mesh holds many tiny voids and specks inside them (at 128 cells:
+    # 348 surfaces, 333 of them voids), which slicers flag
+    raw = fractalc.loads("scene mandelbulb()\n").mesh(resolution=48)
+    _, volumes = raw.shells()
+    assert (volumes < 0).sum() >= 3 and (volumes > 0).sum() >= 3
+    solid, removed = raw.solid()
+    assert removed.voids == (volumes < 0).sum() and removed.kept == 1
+    _, solid_volumes = solid.shells()
+    assert len(solid_volumes) == 1 and solid_volumes[0] == pytest.approx(volumes.max(), rel=1e-9)
+    assert np.all(edge_uses(solid.faces) == 2)
+
+
+def test_cli_writes_stl_as_one_solid_and_other_formats_whole(tmp_path, capsys):
+    scene = tmp_path / "s.frac"
+    scene.write_text(HOLLOW_BALL)
+    stl, ply = tmp_path / "s.stl", tmp_path / "s.ply"
+    assert main(["mesh", str(scene), "-o", str(stl), "--resolution", "64"]) == 0
+    said = capsys.readouterr().err
+    assert "one solid: kept 1 body; filled 1 internal void" in said and "removed 2 other bodies" in said
+    (count,) = struct.unpack_from("<I", stl.read_bytes(), 80)
+    assert main(["mesh", str(scene), "-o", str(ply), "--resolution", "64", "-q"]) == 0
+    assert capsys.readouterr().err == ""
+    assert f"element face {count}".encode() not in ply.read_bytes()[:400]      # the PLY has every surface
+    assert main(["mesh", str(scene), "-o", str(ply), "--resolution", "64", "--shells", "solid", "-q"]) == 0
+    assert f"element face {count}".encode() in ply.read_bytes()[:400]
+    assert exit_code(["mesh", str(scene), "-o", str(stl), "--shells", "all", "--min-volume", "0.1"]) == 2
+    assert "--min-volume is for --shells solid" in capsys.readouterr().err
+
+
 def test_slabs_weld_into_the_same_mesh_as_one_block():
     # one z-plane per kernel call against all planes in one: the seams weld,
     # so the meshes are the same vertex for vertex

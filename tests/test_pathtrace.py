@@ -166,6 +166,25 @@ def test_pass_frames_split_the_samples_with_a_seed_each():
     assert [p.seed for p in pathtrace.pass_frames(run.Frame(16, 12, 40, 6, ()))] != [p.seed for p in passes]
 
 
+@pytest.mark.parametrize("example", ["csg", "mandelbulb"])
+def test_both_integrators_light_the_shipped_examples_alike(example):
+    # mean luminance of what a PNG shows (the file's tone curve, sRGB),
+    # 64 x 48, 8 samples: within 15%. csg.frac measured 0.542 direct
+    # against 0.673 path traced (+24%) while a twisted column's capped
+    # estimate dimmed the whole floor's soft shadow in the direct renderer
+    # (the path tracer's shadow rays are hard); now 0.70 and 0.67.
+    from pathlib import Path
+    from fractalc.write import linear_to_srgb, tone_mapped
+    scene = fractalc.load(Path(__file__).resolve().parents[1] / "examples" / f"{example}.frac")
+    render = scene.checked.render
+    luminance = {}
+    for integrator in ("direct", "path"):
+        image = scene.render(width=64, height=48, samples=8, integrator=integrator)
+        shown = linear_to_srgb(tone_mapped(image.rgba[..., :3], render.exposure, render.tonemap))
+        luminance[integrator] = float((shown @ [0.2126, 0.7152, 0.0722]).mean())
+    assert luminance["path"] == pytest.approx(luminance["direct"], rel=0.15), luminance
+
+
 def test_the_direct_renderer_stays_the_default_and_has_no_path_tracer():
     scene = fractalc.loads(SCENE.replace("integrator: path, ", ""))
     assert scene.checked.render.integrator == "direct"
@@ -221,7 +240,7 @@ def test_denoising_without_open_image_denoise_says_how_to_install_it(tmp_path, m
 
 
 def test_denoising_a_path_traced_image_brings_it_nearer_the_converged_one():
-    pytest.importorskip("pyoidn")
+    import pyoidn  # noqa: F401  (in the test extra: a missing denoiser fails here, it does not skip)
     scene = fractalc.loads(SCENE)
     keys = {"width": 64, "height": 48}
     reference = scene.render(samples=1024, seed=5, **keys).rgba[..., :3]

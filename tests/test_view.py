@@ -195,6 +195,43 @@ def test_a_scene_error_keeps_the_last_image_and_is_reported(scene_file):
     assert viewer.error is None and viewer.scene is not scene
 
 
+def _words(lines) -> str:
+    """The text of lines, wrapped or not: without its white space."""
+    return "".join("".join(lines).split())
+
+
+@pytest.mark.parametrize("size", [(320, 240), (160, 100)])
+def test_the_status_help_and_error_fit_a_small_window(scene_file, size):
+    from fractalc.view import HELP, Panel, overlay, overlay_font
+    viewer = viewer_of(scene_file, width=size[0], height=size[1])
+    viewer.step(0.0)
+    save(scene_file, SCENE.replace("sphere(r)", "sphere(radius: q)"))
+    viewer.step(0.05)
+    viewer.show_help = True
+    viewer.message = f"saved {scene_file.parent}/ball-view-1.png and {scene_file.parent}/ball-view-1.exr"
+    pygame.font.init()
+    font = overlay_font(size)
+    blocks = overlay(viewer, size, font)
+    for block in blocks.values():      # every panel inside the window
+        (x, y), (w, h) = block.topleft, block.size(font)
+        assert x >= 0 and y >= 0 and x + w <= size[0] and y + h <= size[1], (block, w, h)
+    # the status line is wrapped, never cut; the error's message comes first
+    assert _words(blocks[Panel.STATUS].lines) == _words([viewer.status()])
+    message, source, carets = viewer.error.splitlines()[:3]
+    shown = blocks[Panel.ERROR].lines
+    assert _words(shown).startswith(_words([message]))
+    if size == (320, 240):    # room for all: the whole message and help
+        assert _words(blocks[Panel.MESSAGE].lines) == _words([viewer.message])
+        assert _words(blocks[Panel.HELP].lines) == _words(HELP)
+    else:                     # what does not fit is said to be cut
+        lines = blocks[Panel.HELP].lines
+        assert lines[-1].startswith("...") and "more line" in lines[-1], lines
+    # the source line, cut to the panel, still has the carets under their place
+    line, caret = next((a, b) for a, b in zip(shown, shown[1:]) if b.strip() and set(b.strip()) == {"^"})
+    assert line[caret.index("^"):].startswith("q"), (line, caret)
+    assert source.strip()[:12] in line
+
+
 def test_params_change_from_the_keyboard_without_recompiling(scene_file):
     viewer = viewer_of(scene_file, max_samples=1)
     settle(viewer, 1)

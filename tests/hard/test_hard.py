@@ -101,7 +101,15 @@ def test_camera_a_hair_from_the_mandelbulb_sees_its_surface_at_that_distance():
         assert np.all(np.abs(lengths - 1) < 1e-3)
         _, directions = rays(s)
         facing = np.sum(image.normal * directions, axis=-1) < 0
-        assert facing.mean() > 0.85, "normals face the camera (but in the folds of the surface)"
+        # Measured 0.919 (float) and 0.918 (double), PoCL and Intel's runtime
+        # alike, with the default tetrahedral normals (4 evaluations: a
+        # one-sided estimate at each corner of a tetrahedron, so a fold of
+        # the surface within the offset tips more of them away); central
+        # differences, the default the 0.95 here was set with (before the
+        # sweep chose tetrahedral, 94c4ab7), measure 0.976 / 0.975: below.
+        assert facing.mean() > 0.9, "normals face the camera (but in the folds of the surface)"
+    central = s.render(normals="central")
+    assert (np.sum(central.normal * rays(s)[1], axis=-1) < 0).mean() > 0.95, "central differences face it"
     # float resolves this close-up as double does: same depths, same normals
     relative = np.abs(float_.depth - double.depth) / double.depth
     assert np.median(relative) < 1e-3 and np.percentile(relative, 95) < 0.05
@@ -287,8 +295,15 @@ def test_a_million_units_away(case, precision):
     hit = np.isfinite(image.depth)
     assert 0.1 < must_hit.mean() < 0.8, "the sphere is in view"
     assert hit[must_hit].all() and not hit[must_miss].any()
-    # depth on the sphere's face (away from its rim) within a few thresholds
+    # depth on the sphere's face (away from its rim): a ray stops where the
+    # distance falls below the threshold, at most threshold / cos(incidence)
+    # before the surface; and the image's Z is float32 whatever the
+    # precision, whose spacing near 1e6 is 1/16 (0.86 thresholds of the far
+    # camera: its double depths measured up to 2.07 thresholds off, within
+    # 0.93 of this bound, PoCL and Intel's runtime alike)
     face = passing < 0.9
     expected = ray_sphere(origin, directions, centre, 1.0)
     error = np.abs(image.depth[face] - expected[face])
-    assert np.all(error <= 3 * threshold[face] + 2 * rounding)
+    incidence = np.sqrt(1 - passing[face] ** 2)
+    stored = 0.5 * np.spacing(expected[face].astype(np.float32)).astype(np.float64)
+    assert np.all(error <= threshold[face] / incidence + stored + 2 * rounding)
