@@ -54,3 +54,12 @@ def checked(name: str, value, subject: str | None = None):
     ValueError saying what is wrong, of `subject` (default: the name;
     '' for none, when the caller names it)."""
     return check_value(spec(name), name, value, repr(name) if subject is None else subject)
+
+
+def require_type(name: str, value, types: type | tuple[type, ...], takes: str) -> None:
+    """TypeError naming the argument `name` and what it `takes` where
+    `value` is not one of `types` (a bool is never a number here)."""
+    if not isinstance(value, types) or (isinstance(value, bool) and bool not in (
+            types if isinstance(types, tuple) else (types,))):
+        shown = repr(value) if len(repr(value)) <= 60 else type(value).__name__
+        raise TypeError(f"{name} must be {takes}, not {shown}")

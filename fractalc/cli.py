@@ -193,6 +193,12 @@ def command_render(args) -> int:
     if args.bits != 8 and exr:
         raise UsageError(f"--bits is for PNG (and other integer) output, not {args.output}")
     _require_writable(("-o", args.output, args.output))
+    if args.environment_map is not None:
+        from .pathtrace import environment_map
+        try:
+            environment_map(os.path.abspath(args.environment_map))
+        except ValueError as error:
+            raise UsageError(f"--environment-map {args.environment_map}: {error}") from None
     scene = _load(args)
     overrides = {"width": args.width, "height": args.height, "samples": args.samples, "aovs": args.aov}
     try:
@@ -337,14 +343,12 @@ def _frame_range(text: str) -> tuple[int, int | None]:
 
 def command_animate(args) -> int:
     cluster = _cluster(args)
+    from .animate import check_pattern, frame_file
     try:
-        first, second = args.output % 0, args.output % 1
-    except (TypeError, ValueError):
-        first = second = None
-    if first is None or first == second:
-        raise UsageError(f"-o {args.output}: the name must hold the frame number, e.g. frames/frame_%04d.png")
-    if not first.lower().endswith((".exr", ".png")):
-        raise UsageError(f"-o {args.output}: frames must be .exr or .png")
+        check_pattern(args.output)
+    except ValueError as error:
+        raise UsageError(f"-o {error}") from None
+    first = frame_file(args.output, 0)
     if args.mp4 and not args.mp4.lower().endswith(".mp4"):
         raise UsageError(f"--mp4 {args.mp4}: the name must end in .mp4")
     if args.mp4 and args.frames:

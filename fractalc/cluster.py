@@ -32,7 +32,7 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from .api import Image, Scene, image_from_pixels, loads
+from .api import Image, Scene, image_from_pixels, loads, require_image_memory
 from .arguments import checked
 from .errors import RenderError
 from .memory import require
@@ -334,11 +334,13 @@ def render_still(scene: Scene, client, seed: int = 0, camera=None, progress: boo
     (default: enough tiles for 4 per worker, whole lane blocks, at most
     TILE_ROWS) rendered by its workers, assembled here into the image as
     they arrive (the client holds the image and a few tiles)."""
-    if tile_rows is not None and tile_rows < 1:
-        raise ValueError(f"tile_rows must be at least 1, not {tile_rows}")
+    from .passes import channels
+    if tile_rows is not None:
+        tile_rows = checked("tile_rows", tile_rows)
     spec = scene_spec(scene, render_keys)
     settings = scene._settings(render_keys)
     height, width = settings.height, settings.width
+    require_image_memory(width, height, len(channels(settings.aovs)), path_traced=False)   # tiles arrive summed
     if tile_rows is None:
         share = -(-height // (4 * worker_count(client)))
         tile_rows = min(TILE_ROWS, -(-share // BLOCK_ROWS) * BLOCK_ROWS)
