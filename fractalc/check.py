@@ -43,6 +43,12 @@ _ERROR = Value("error", None)
 # 11 s to build and render once, 2000 spheres 30 s, 4000 spheres 73 s
 # (benchmarks/scene_size.py; 10000 spheres took 17 minutes).
 MAX_SHAPES = 6000
+# Formula steps in one round of a hybrid (each `f() * n` counts n): a round
+# is written out whole in the orbit loop, so the kernel grows with it. On 2
+# cores (load 5), hybrids of bulb and amazing_box steps, iterations 1000,
+# check in 0.3-1.7 s and then build and render once in 7 s (100 steps),
+# 26 s (200), 64 s (400; benchmarks/hybrid_size.py); 1000 steps built for 84 s.
+MAX_HYBRID_STEPS = 256
 # The hit threshold's largest multiple: normals are differences over that
 # step, which beyond it can pass float's range on the scene (NaN normals).
 MAX_EPSILON_SCALE = 1000
@@ -238,6 +244,7 @@ class _Checker:
                 self.fail(arg.span, f"'hybrid' takes formulas (e.g. hybrid(bulb(8) * 2, amazing_box())), "
                                     f"this is {_TYPE_WORDS[value.type]}")
             sequence.extend(value.data)
+            self.require_hybrid_steps(sequence, arg.span)
         if not sequence:
             self.fail(e.span, "'hybrid' needs at least one formula")
         return Value(FORMULA, tuple(sequence))
@@ -252,7 +259,17 @@ class _Checker:
         n = count.data.value if ir.is_const(count.data) else None
         if n is None or n != math.floor(n) or not 1 <= n <= 100:
             self.fail(e.right.span, "a formula's repeat count must be a constant whole number from 1 to 100")
-        return Value(FORMULA, tuple(replace(use, count=use.count * int(n)) for use in formula.data))
+        repeated = tuple(replace(use, count=use.count * int(n)) for use in formula.data)
+        self.require_hybrid_steps(repeated, e.right.span)
+        return Value(FORMULA, repeated)
+
+    def require_hybrid_steps(self, sequence, span: Span) -> None:
+        """A hybrid's round of at most MAX_HYBRID_STEPS steps, refused where it passes them."""
+        steps = sum(use.count for use in sequence)
+        if steps > MAX_HYBRID_STEPS:
+            self.fail(span, f"the hybrid passes {MAX_HYBRID_STEPS} formula steps per round here ({steps}): "
+                            f"each is written out in the kernel, which would take minutes to compile. "
+                            f"Use fewer steps (a formula's repeat count, e.g. 'bulb() * 4', counts as 4)")
 
     def fractal(self, e: ast.Call) -> Value:
         bound = self.bind(e, FORMULA_FORMS["fractal"], e.args)
