@@ -145,7 +145,10 @@ def plan_frames(scene: Scene, pattern: str, fps: float, seed: int, overwrite: bo
     from the same scene text and settings (all of them with `overwrite`),
     among `frames` (first, last or None: the end) if given, so that
     machines can share an animation; makes the frames' folder."""
+    from .arguments import checked, require_type
     pattern = check_pattern(pattern)
+    require_type("seed", seed, int, "a whole number")
+    seed = checked("seed", seed)
     path = scene.checked.path
     if path is None:
         raise ValueError(f"{scene.checked.file} has no 'path' to animate")

@@ -170,7 +170,7 @@ class Scene:
                 raise TypeError(f"param '{name}' must be a number, not {value!r}") from None
             except OverflowError:       # an int beyond float's range: 10**400
                 raise ValueError(f"param '{name}' must be a finite number within ±{FLOAT_MAX:.3g}, "
-                                 f"not {value:.3g}") from None
+                                 f"not a whole number of {len(str(abs(value)))} digits") from None
             if not in_float_range(value):   # NaN would pass any range check
                 raise ValueError(f"param '{name}' must be a finite number within ±{FLOAT_MAX:.3g}, not {value!r}")
             if (info.low is not None and value < info.low) or (info.high is not None and value > info.high):
@@ -327,6 +327,8 @@ class Scene:
         if camera is not None:
             require_type("camera", camera, CAMERA_TYPES, "a fractalc.Camera")
         if cluster is not None:
+            if not all(hasattr(cluster, name) for name in ("submit", "nthreads")):
+                raise TypeError(f"cluster must be a Dask client (distributed.Client), not {cluster!r:.60}")
             from .cluster import render_still
             return render_still(self, cluster, seed, camera, progress, **render_keys)
         settings = self._settings(render_keys)

@@ -177,13 +177,18 @@ class Device:
         return None if self.info.kind == "GPU" else (8, 1)
 
 
-@lru_cache(maxsize=None)
 def open_device(spec: str | None = None) -> Device:
     """The device named by `spec` (index, or a substring of its platform,
     name or kind: "gpu", "cpu"), else
-    $FRACTALC_DEVICE, else the first GPU, else the first device."""
+    $FRACTALC_DEVICE, else the first GPU, else the first device; one
+    context per device, however it is named (built programs are shared
+    by device, and belong to a context)."""
+    return _opened(_device(spec))
+
+
+@lru_cache(maxsize=None)
+def _opened(device) -> Device:
     cl = _cl()
-    device = _device(spec)
     context = cl.Context([device])
     index = all_devices().index(device)
     return Device(device, context, cl.CommandQueue(context), _describe(index, device))

@@ -382,15 +382,21 @@ def command_animate(args) -> int:
 
 
 def _bounds(text: str) -> tuple[float, ...]:
-    """--bounds: six numbers XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX (checked with
-    the resolution and precision: mesh.check_bounds)."""
-    from .arguments import parse_number
+    """--bounds: six numbers XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX, checked as
+    mesh.check_bounds checks them at the finest resolution and precision
+    (again with the command's resolution and precision once they are known)."""
+    from .arguments import MAX_RESOLUTION, parse_number
+    from .mesh import check_bounds
     try:
         values = tuple(parse_number(x) for x in text.split(","))
     except ValueError:
         values = ()
     if len(values) != 6:
         raise argparse.ArgumentTypeError(f"'{text}' is not six numbers XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX")
+    try:
+        check_bounds(values, MAX_RESOLUTION, True, f"'{text}'")
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
     return values
 
 
