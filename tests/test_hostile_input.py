@@ -2,6 +2,10 @@
 builds and renders, mistakes are located errors (never a traceback), and
 nothing from the file reaches the kernel unescaped (issue 10)."""
 
+import os
+import re
+import sys
+
 import numpy as np
 import pytest
 
@@ -670,3 +674,152 @@ def test_mesh_bounds_that_make_cells_degenerate_are_refused(tmp_path, capsys):
     scene = fractalc.loads("scene sphere(1).translate((1000000, 0, 0))\n", precision="double")
     mesh = scene.mesh(resolution=8, bounds=(1e6 - 1.5, -1.5, -1.5, 1e6 + 1.5, 1.5, 1.5))  # double resolves it
     assert np.isfinite(mesh.vertices).all() and np.isfinite(mesh.normals).all()
+
+
+# ---- environment maps: read in bands, their pixels finite (issue 22) ----------
+
+def _write_map(path, pixels, tile=0):
+    import OpenImageIO as oiio
+    height, width, channels = pixels.shape
+    fmt = oiio.UINT8 if str(path).endswith(".png") else oiio.FLOAT
+    spec = oiio.ImageSpec(width, height, channels, fmt)
+    if tile:
+        spec.tile_width = spec.tile_height = tile
+    output = oiio.ImageOutput.create(str(path))
+    assert output.open(str(path), spec), oiio.geterror()
+    output.write_image(pixels)
+    output.close()
+
+
+def _box_filtered(pixels, rows, columns):
+    """The float64 reference: each texel the mean of the pixels whose
+    centres fall in it (the nearest pixel where none does), negative
+    values taken as 0."""
+    pixels = np.maximum(pixels.astype(np.float64), 0.0)
+    height, width = pixels.shape[:2]
+    table = np.zeros((rows, columns, 3))
+    y = (np.arange(height) + 0.5) / height * rows
+    x = (np.arange(width) + 0.5) / width * columns
+    for r in range(rows):
+        for c in range(columns):
+            inside = pixels[(y >= r) & (y < r + 1)][:, (x >= c) & (x < c + 1)]
+            table[r, c] = inside.reshape(-1, pixels.shape[2])[:, :3].mean(axis=0) if inside.size \
+                else pixels[r * height // rows, c * width // columns, :3]
+    return table
+
+
+@pytest.mark.parametrize("size, tile, name", [((37, 203, 4), 0, "a.exr"), ((70, 130, 3), 16, "b.exr"),
+                                              ((5, 9, 3), 0, "small.exr")])
+def test_an_environment_map_read_in_bands_is_the_box_filtered_map(size, tile, name, tmp_path, monkeypatch):
+    """One row read at a time (a scanline file, a tiled one, a map smaller
+    than the table): the texels of the whole map's float64 box filter."""
+    from fractalc import pathtrace
+    monkeypatch.setattr(pathtrace, "MAP_READ_BYTES", 1)
+    pixels = np.random.default_rng(22).normal(1.0, 2.0, size).astype(np.float32)
+    _write_map(tmp_path / name, pixels, tile)
+    texels = pathtrace.environment_map(str(tmp_path / name))
+    np.testing.assert_allclose(texels, _box_filtered(pixels, pathtrace.MAP_HEIGHT, pathtrace.MAP_WIDTH),
+                               rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS as Linux counts it")
+def test_a_large_environment_map_is_read_in_the_memory_of_its_table(tmp_path):
+    """A 4000x2000 PNG was read whole, as float32 then float64 (290 MB;
+    an 8000x4000 one peaked at 1.5 GB): read within 96 MB of address space
+    more than the reader had before it."""
+    import subprocess
+    pixels = np.zeros((2000, 4000, 3), np.uint8)
+    pixels[..., 0] = (np.arange(2000) * 255 // 2000)[:, None]
+    _write_map(tmp_path / "sky.png", pixels)
+    code = ("import resource, sys\nfrom fractalc import pathtrace\n"
+            "used = int(next(l for l in open('/proc/self/status') if l.startswith('VmSize')).split()[1]) * 1024\n"
+            "resource.setrlimit(resource.RLIMIT_AS, (used + 96 * 2 ** 20, resource.RLIM_INFINITY))\n"
+            "texels = pathtrace.environment_map(sys.argv[1])\nprint(texels[:, 0, 0].min(), texels[:, 0, 0].max())")
+    path = os.pathsep.join([os.path.dirname(os.path.dirname(os.path.abspath(__file__))), os.environ.get("PYTHONPATH", "")])
+    result = subprocess.run([sys.executable, "-c", code, str(tmp_path / "sky.png")], capture_output=True, text=True,
+                            timeout=120, env={**os.environ, "PYTHONPATH": path})
+    assert result.returncode == 0, result.stderr[-2000:]
+    low, high = map(float, result.stdout.split())
+    assert 0 <= low < 0.05 and 0.9 < high <= 1.0     # the gradient down the rows, averaged into the table
+
+
+def test_a_map_with_a_nan_pixel_is_an_error_at_what_named_it(tmp_path, capsys):
+    """'fractalc: error: non-finite constant nan' came with no place."""
+    from fractalc.cli import main
+    pixels = np.ones((32, 64, 3), np.float32)
+    pixels[5, 7, 1] = np.nan
+    _write_map(tmp_path / "nan.exr", pixels)
+    text = 'scene sphere(1)\nrender { environment: { map: "nan.exr" } }\n'
+    (tmp_path / "scene.frac").write_text(text)
+    with pytest.raises(fractalc.SceneError) as error:
+        fractalc.load(tmp_path / "scene.frac")
+    assert (error.value.line, error.value.column) == (2, text.splitlines()[1].index('"nan.exr"') + 1)
+    assert "has a non-finite pixel (1, nan, 1) at x 7, y 5" in error.value.message
+    (tmp_path / "plain.frac").write_text("scene sphere(1)\n")
+    printed = _usage_error(["render", str(tmp_path / "plain.frac"), "-o", str(tmp_path / "o.png"),
+                            "--environment-map", str(tmp_path / "nan.exr")], capsys)
+    assert f"--environment-map {tmp_path / 'nan.exr'}: the environment map" in printed and "non-finite" in printed
+    with pytest.raises(ValueError, match="non-finite pixel"):
+        fractalc.loads("scene sphere(1)").render(environment_map=tmp_path / "nan.exr")
+    assert not (tmp_path / "o.png").exists()
+
+
+# ---- render farms and animations (issue 22) -------------------------------------
+
+@pytest.mark.parametrize("address, words", [
+    ("tls://127.0.0.1:1", "not tls://"), ("ucx://127.0.0.1:1", "not ucx://"), ("inproc://x", "not inproc://"),
+    ("tcp://localhost", "tcp://HOST:PORT, with a port from 1 to 65535"), ("tcp://host:٣", "a port from 1"),
+])
+def test_a_cluster_scheme_fractalc_does_not_support_is_refused_in_one_line(address, words, tmp_path, capsys):
+    """tls:// and ucx:// were TypeErrors from inside Dask, inproc:// 'not
+    enough values to unpack'."""
+    pytest.importorskip("distributed")
+    scene = tmp_path / "scene.frac"
+    scene.write_text("scene sphere(1)\n")
+    printed = _usage_error(["render", str(scene), "-o", str(tmp_path / "o.png"), "--cluster", address], capsys)
+    assert f"--cluster {address}: " in printed and words in printed and "Traceback" not in printed
+
+
+def test_a_cluster_that_cannot_be_reached_is_one_line(tmp_path, capsys, monkeypatch):
+    distributed = pytest.importorskip("distributed")
+    from fractalc.cli import main
+
+    def unreachable(address, timeout):
+        raise OSError(f"Timed out trying to connect to {address} after {timeout}\nmore of Dask's words")
+    monkeypatch.setattr(distributed, "Client", unreachable)
+    scene = tmp_path / "scene.frac"
+    scene.write_text("scene sphere(1)\n")
+    assert main(["render", str(scene), "-o", str(tmp_path / "o.png"), "--cluster", "farm:8786", "-q"]) == 1
+    err = capsys.readouterr().err
+    assert err == ("fractalc: error: cannot reach the Dask scheduler at tcp://farm:8786: Timed out trying to "
+                   "connect to tcp://farm:8786 after 10s\n")
+
+
+@pytest.mark.parametrize("pattern, words", [
+    ("fr/%4d/x.png", "the frame number goes in the file's name, not a folder's"),
+    ("fr/%c.png", "the name must hold the frame number once"),
+    ("fr/%d_%d.png", "the name must hold the frame number once"),
+    ("fr/100%_%d.png", "the name must hold the frame number once"),
+    ("fr/%s.png", "the name must hold the frame number once"),
+    ("fr/f\x01%d.png", "a control character"),
+    ("fr/%d.jpg", "frames must be .exr or .png"),
+])
+def test_an_animations_file_pattern_is_checked_whole_before_the_first_frame(pattern, words, tmp_path, capsys):
+    """'fr/%4d/x.png' wrote frame 0 and failed at frame 1; 'fr/%c.png' said
+    'embedded null byte'."""
+    scene = tmp_path / "scene.frac"
+    scene.write_text(OPTIONS_SCENE)
+    printed = _usage_error(["animate", str(scene), "-o", str(tmp_path / pattern), "-q"], capsys)
+    assert words in printed and "Traceback" not in printed
+    assert not (tmp_path / "fr").exists()
+    from fractalc.animate import render_frames
+    with pytest.raises(ValueError, match=re.escape(words)):
+        render_frames(fractalc.loads(OPTIONS_SCENE), str(tmp_path / pattern), 2)
+
+
+def test_a_path_too_long_for_its_fps_is_refused_before_any_frame(tmp_path, capsys):
+    scene = tmp_path / "scene.frac"
+    scene.write_text("scene sphere(1)\npath { 0: { position: (0, -4, 1) }, 1e30: { position: (4, 0, 1) } }\n")
+    printed = _usage_error(["animate", str(scene), "-o", str(tmp_path / "f_%d.png")], capsys)
+    assert "fps 30: the path's 1e+30 s would be 3e+31 frames, more than 1000000" in printed
+    assert [p.name for p in tmp_path.iterdir()] == ["scene.frac"]
