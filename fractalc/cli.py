@@ -679,6 +679,12 @@ def _terminating_signals_raise():
 
 def main(argv: list[str] | None = None) -> int:
     parser = _parser()
+    argv = sys.argv[1:] if argv is None else argv
+    for item in argv:
+        option, equals, value = item.partition("=")
+        if equals and option.startswith("-") and value == "--":
+            # argparse takes '--' for the end of options and gives the option an empty list
+            parser.error(f"{option}=--: '--' is not a value for {option}")
     args = parser.parse_args(argv)
     if getattr(args, "no_cache", False):
         # Before OpenCL loads: the driver's and pyopencl's binary caches.
