@@ -741,8 +741,8 @@ def _exit_with_launcher() -> None:
     then (prctl PR_SET_PDEATHSIG; SIGKILL where SIGTERM is ignored), which
     unwinds through every cleanup; elsewhere a watchdog thread polls the
     parent's pid and sends the same."""
-    try:
-        launcher = int(os.environ.get(LAUNCHER_ENVIRONMENT, ""))
+    try:     # read once: a process this one starts has another parent
+        launcher = int(os.environ.pop(LAUNCHER_ENVIRONMENT, ""))
     except ValueError:
         return
     stop = signal.SIGKILL if signal.getsignal(signal.SIGTERM) == signal.SIG_IGN else signal.SIGTERM
