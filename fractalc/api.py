@@ -18,7 +18,8 @@ import numpy as np
 
 from . import __version__, pathtrace, program, run
 from .arguments import checked, require_type
-from .build import build, open_device
+from .build import build
+from .devices import open_device
 from .denoise import denoise_image, require_denoiser
 from .check import FLOAT_MAX, RENDER_KEYS, check, check_param_values, check_value, in_float_range
 from .emit import Target, emit, uniform_source
@@ -195,13 +196,15 @@ class Scene:
         return self.checked.render.precision
 
     def _target(self, settings: RenderSettings, lanes: int | None = None) -> Target:
+        """The kernel's target: this scene's device, or (`lanes` given, as
+        `fractalc compile --lanes` does) no device in particular."""
         double = settings.precision == "double"
-        if lanes is None:
-            device = self.device
-            if double and not device.info.double:
-                raise RenderError(f"the OpenCL device '{device.info.name}' does not support double precision")
-            lanes = self.lanes_in_use
-        return Target(lanes=lanes, double=double)
+        if lanes is not None:
+            return Target(lanes=lanes, double=double)
+        device = self.device
+        if double and not device.info.double:
+            raise RenderError(f"the OpenCL device '{device.info.name}' does not support double precision")
+        return Target(lanes=self.lanes_in_use, double=double, exact_native=device.lane_choice.native_exact)
 
     @property
     def lanes_in_use(self) -> int:

@@ -240,20 +240,33 @@ def command_check(args) -> int:
 
 
 def command_devices(args) -> int:
-    from .build import list_devices
-    from .lanes import choose, describe
-    devices = list_devices()
-    if not devices:
-        from .build import INSTALL_HINT
-        raise RenderError(INSTALL_HINT)
-    for d in devices:
+    from . import devices as found
+    from .drivers import SWITCH_ENVIRONMENT, bundled_enabled, bundled_libraries
+    from .lanes import UnusableDevice, choose, describe
+    infos = found.list_devices()
+    if not infos:
+        raise RenderError(found.INSTALL_HINT)
+    verdicts = {}
+    for d in infos:
         try:
-            lanes = describe(choose(d, refresh=args.probe))
-        except RenderError as error:
-            lanes = f"unusable: {error}"
-        print(f"{d.index}: {d.name} [{d.kind}] on {d.platform}; {d.version}; "
-              f"{d.compute_units} compute units; double: {'yes' if d.double else 'no'}; "
-              f"rays per work-item: {lanes}")
+            verdicts[d.index] = f"builds: yes; rays per work-item: {describe(choose(d, refresh=args.probe))}"
+        except UnusableDevice as unusable:
+            verdicts[d.index] = f"builds: no: {found.cannot_build(d, unusable.failures)}"
+    try:
+        default = found.default_device(infos).index if not os.environ.get(found.DEVICE_ENVIRONMENT) else None
+    except RenderError:
+        default = None
+    ranks = {d.index: rank for rank, d in enumerate(sorted(infos, key=found.speed_rank), 1)}
+    for d in infos:
+        print(f"{'*' if d.index == default else ' '} {d.index}: {d.name} [{d.kind}] on {d.driver_label}; "
+              f"{d.version}; {d.compute_units} compute units; double: {'yes' if d.double else 'no'}; "
+              f"{verdicts[d.index]}; speed rank {ranks[d.index]} of {len(infos)}")
+    if default is not None:
+        print("* the default: the fastest device that builds (GPU, then Intel's CPU runtime, then PoCL; "
+              "docs/drivers.md); --device N or FRACTALC_DEVICE=N chooses another")
+    for driver, library in bundled_libraries():
+        state = "registered" if bundled_enabled() else f"left out ({SWITCH_ENVIRONMENT}=0)"
+        print(f"bundled driver {driver.distribution}: {library} {state}")
     return 0
 
 
@@ -596,11 +609,14 @@ def _parser() -> argparse.ArgumentParser:
     device_options(mesh)
     mesh.set_defaults(run=command_mesh)
 
-    devices = commands.add_parser("devices", help="list OpenCL devices and the rays per work-item of each",
-                                  description="List the OpenCL devices. For each CPU device, the rays "
-                                              "per work-item (vector lanes) are the widest width its "
-                                              "driver builds and runs, found by a probe in a child "
-                                              "process and remembered.")
+    devices = commands.add_parser("devices", help="list OpenCL devices, whether each builds, its lanes and speed rank",
+                                  description="List the OpenCL devices with their drivers. For each CPU "
+                                              "device, whether its driver builds fractalc's kernels (if "
+                                              "not, the driver's first error and the fix) and the rays "
+                                              "per work-item (vector lanes): the widest width its driver "
+                                              "builds and runs, found by a probe in a child process and "
+                                              "remembered. The default device (*) is the fastest that "
+                                              "builds.")
     devices.add_argument("--probe", action="store_true", help="probe every device again")
     devices.set_defaults(run=command_devices)
     return parser

@@ -187,7 +187,7 @@ def _unmark_at_exit() -> None:
     next fractalc process would clear the kernel cache as after a crash:
     remove it at the worker's normal exit instead."""
     from multiprocessing.util import Finalize
-    from .lanes import cache_dir
+    from .cache import cache_dir
     marker = cache_dir() / "building" / str(os.getpid())
     Finalize(None, marker.unlink, kwargs={"missing_ok": True}, exitpriority=0)
 

@@ -34,6 +34,7 @@ MAX_INVERSE_SQUARE = 1e8
 class Target:
     lanes: int = 8          # rays per work-item: 1 (GPU) or 8/16 (CPU vector lanes)
     double: bool = False    # `real` is double
+    exact_native: bool = False  # the device's native_ functions are exact (lanes.LaneChoice.native_exact)
     count: bool = False     # the counting build's `#if FEATURE_COUNT` lines (fractalc/count.py)
 
 
@@ -555,10 +556,11 @@ def resolve_features(text: str, enabled: dict[str, bool]) -> str:
 
 def fast_math(setting: str, target: Target) -> bool:
     """Whether the kernel uses `native_` functions: `on`, or `auto` on CPUs
-    (vector lanes), where the speed/error sweep measured no error growth
-    (docs/performance.md); never in double, as OpenCL's `native_`
-    functions are float-only."""
-    wanted = setting == "on" or (setting == "auto" and target.lanes > 1)
+    (vector lanes) whose driver's native_ functions the lane probe measured
+    exact (PoCL's; the speed/error sweep measured no error growth there,
+    docs/performance.md; Intel's are approximate: native_exp off by 2e-4);
+    never in double, as OpenCL's `native_` functions are float-only."""
+    wanted = setting == "on" or (setting == "auto" and target.lanes > 1 and target.exact_native)
     return wanted and not target.double
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -25,12 +26,13 @@ from typing import Callable
 
 import numpy as np
 
+from .cache import cache_dir
+from .errors import RenderError
 from .resources import resource_dir
 
 WIDTHS = (16, 8, 4, 1)
 CHOICES = (1, 2, 4, 8, 16)
 ENVIRONMENT = "FRACTALC_LANES"
-CACHE_ENVIRONMENT = "FRACTALC_CACHE_DIR"
 PROBE_TIMEOUT = 180.0      # seconds for one width: a compiler that takes longer has failed
 PROBE_COUNT = 256          # probe inputs (a multiple of every width)
 
@@ -85,6 +87,20 @@ def probe_error(results: np.ndarray, double: bool) -> str | None:
     return None
 
 
+def native_error(results: np.ndarray, double: bool) -> float | None:
+    """The worst relative error of the probe's `native_` rows, or None in
+    double (where they are the exact functions)."""
+    if double:
+        return None
+    x, y = (v.astype(np.float32).astype(np.float64) for v in probe_inputs())
+    worst = 0.0
+    for row, (name, reference) in zip(results, PROBE_FUNCTIONS):
+        if name.startswith("native_"):
+            expected = reference(x, y)
+            worst = max(worst, float(np.max(np.abs(row - expected) / np.maximum(np.abs(expected), 1e-30))))
+    return worst
+
+
 def probe_source(lanes: int, double: bool) -> str:
     root = resource_dir("stdlib_cl")
     text = "\n".join([f"#define LANES {lanes}", f"#define PRECISION_DOUBLE {int(double)}",
@@ -97,13 +113,21 @@ def probe_source(lanes: int, double: bool) -> str:
 
 # ---- the child process ---------------------------------------------------------
 
-def _probe_in_this_process(device_index: int, lanes: int, double: bool) -> str | None:
+def _probe_in_this_process(device_index: int, lanes: int, double: bool) -> dict:
+    """The verdict: `error` (None if the probe passed) and `native_error`."""
+    from .drivers import platform_devices, register
+    register()      # before the loader starts; the driver cache is the child's own (run_probe)
     import pyopencl as cl
-    from .build import all_devices
-    device = all_devices()[device_index]
-    context = cl.Context([device])
+    device = platform_devices(cl)[device_index]
+    try:
+        context = cl.Context([device])
+    except cl.Error as error:
+        raise ProbeBuildFailed(first_error_line(str(error)), anything=False) from None
     queue = cl.CommandQueue(context)
-    program = cl.Program(context, probe_source(lanes, double)).build()
+    try:
+        program = cl.Program(context, probe_source(lanes, double)).build()
+    except cl.Error as error:
+        raise ProbeBuildFailed(first_error_line(str(error)), _builds_anything(context)) from None
     scalar = np.float64 if double else np.float32
     x, y = probe_inputs()
     data = np.concatenate([x, y]).astype(scalar)
@@ -113,7 +137,41 @@ def _probe_in_this_process(device_index: int, lanes: int, double: bool) -> str |
     out_buffer = cl.Buffer(context, flags.WRITE_ONLY, out.nbytes)
     program.probe(queue, (PROBE_COUNT // lanes,), None, in_buffer, out_buffer, np.int32(PROBE_COUNT))
     cl.enqueue_copy(queue, out, out_buffer)
-    return probe_error(out.astype(np.float64), double)
+    results = out.astype(np.float64)
+    return {"error": probe_error(results, double), "native_error": native_error(results, double)}
+
+
+class ProbeBuildFailed(Exception):
+    """The probe did not build (or the device gave no context);
+    `anything`: whether the driver builds a trivial kernel (if not, no
+    width will do)."""
+
+    def __init__(self, line: str, anything: bool):
+        super().__init__(line)
+        self.line, self.anything = line, anything
+
+
+def _builds_anything(context) -> bool:
+    import pyopencl as cl
+    try:
+        cl.Program(context, "__kernel void nothing(__global float *a) { a[0] = 1.0f; }").build()
+    except cl.Error:
+        return False
+    return True
+
+
+def first_error_line(log: str) -> str:
+    """The driver's own first error line in a build failure's text: the
+    first `error:` line (clang's), else the build log's first line."""
+    lines = [line.strip() for line in log.splitlines() if line.strip()]
+    marked = [line for line in lines if re.search(r"\berror\b\s*:", line, re.IGNORECASE)
+              and not line.startswith("clBuildProgram failed")]
+    if marked:
+        return marked[0][:300]
+    after_header = [i for i, line in enumerate(lines) if line.startswith("Build on")]
+    if after_header and after_header[0] + 1 < len(lines):
+        return lines[after_header[0] + 1][:300]
+    return (lines[0] if lines else "no build log")[:300]
 
 
 def child_main(argv: list[str]) -> int:
@@ -123,8 +181,11 @@ def child_main(argv: list[str]) -> int:
     warnings.simplefilter("ignore")     # compiler chatter is not the verdict
     device_index, lanes = int(argv[0]), int(argv[1])
     for precision in argv[2:]:
-        error = _probe_in_this_process(device_index, lanes, precision == "double")
-        print(json.dumps({"precision": precision, "error": error}), flush=True)
+        try:
+            verdict = _probe_in_this_process(device_index, lanes, precision == "double")
+        except ProbeBuildFailed as failed:
+            verdict = {"error": failed.line, "builds": failed.anything}
+        print(json.dumps({"precision": precision, **verdict}), flush=True)
     return 0
 
 
@@ -143,52 +204,66 @@ def probe_command(device_index: int, lanes: int, precisions: tuple[str, ...]) ->
             "sys.exit(child_main(sys.argv[1:]))", str(device_index), str(lanes), *precisions]
 
 
+@dataclass(frozen=True)
+class ProbeFailure:
+    why: str                # in words, with the driver's own first error line where it gave one
+    hopeless: bool = False  # the driver builds no kernel at all: no narrower width will do
+
+
+@dataclass(frozen=True)
+class ProbePassed:
+    native_error: float | None = None   # the worst relative error of the float native_ functions
+
+
 def run_probe(device_index: int, lanes: int, precisions: tuple[str, ...], command: list[str] | None = None,
-              timeout: float = PROBE_TIMEOUT) -> str | None:
+              timeout: float = PROBE_TIMEOUT) -> ProbeFailure | ProbePassed:
     """Run the probe of `lanes` in a child (`command`, by default the real
-    one); None if it passed for every precision, else why it failed. The
-    child gets a driver cache folder of its own (a crash leaves nothing
-    half-built in the user's), and its output never reaches the terminal."""
+    one): passed for every precision, or why it failed. The child gets a
+    driver cache folder of its own (a crash leaves nothing half-built in
+    the user's), and its output never reaches the terminal."""
     command = command or probe_command(device_index, lanes, precisions)
     with tempfile.TemporaryDirectory(prefix="fractalc-probe-") as scratch:
-        environment = dict(os.environ, POCL_CACHE_DIR=scratch, PYOPENCL_NO_CACHE="1",
-                           PYOPENCL_CACHE_DIR=scratch)
+        environment = dict(os.environ, POCL_CACHE_DIR=scratch, PYOPENCL_NO_CACHE="1")
         try:
             done = subprocess.run(command, capture_output=True, text=True, timeout=timeout,
                                   env=environment, stdin=subprocess.DEVNULL)
         except subprocess.TimeoutExpired:
-            return f"the OpenCL compiler took over {timeout:.0f} s"
+            return ProbeFailure(f"the OpenCL compiler took over {timeout:.0f} s")
     verdicts = {}
     for line in done.stdout.splitlines():
         try:
             verdict = json.loads(line)
-            verdicts[verdict["precision"]] = verdict["error"]
+            verdicts[verdict["precision"]] = verdict
         except (ValueError, KeyError, TypeError):
             continue
     for precision in precisions:
         if precision not in verdicts:
             failure = _describe_exit(done.returncode) if done.returncode else "the probe printed no verdict"
-            return f"{failure} ({precision})"
-        if verdicts[precision] is not None:
-            return verdicts[precision]
-    return None
+            return ProbeFailure(f"{failure} ({precision})")
+        if verdicts[precision].get("error") is not None:
+            return ProbeFailure(f"{verdicts[precision]['error']} ({precision})",
+                                hopeless=verdicts[precision].get("builds") is False)
+    return ProbePassed(verdicts.get("float", {}).get("native_error"))
 
 
 # ---- the choice ----------------------------------------------------------------
+
+NATIVE_EXACT = 1e-6    # relative error of native_ functions that counts as exact (a few float ulps)
+
 
 @dataclass(frozen=True)
 class LaneChoice:
     lanes: int
     reason: str                              # how it was chosen, in words
     failures: tuple[tuple[int, str], ...] = ()   # (width, why) of the wider widths that failed
+    native_error: float | None = None        # the probe's measure of the driver's float native_ functions
 
-
-def cache_dir() -> Path:
-    """fractalc's own cache folder: $FRACTALC_CACHE_DIR, else the XDG cache."""
-    if os.environ.get(CACHE_ENVIRONMENT):
-        return Path(os.environ[CACHE_ENVIRONMENT])
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "fractalc"
+    @property
+    def native_exact(self) -> bool:
+        """Whether `fast_math: auto` may use the native_ functions: the
+        probe measured them within a few ulps (PoCL's are the exact
+        functions; Intel's native_exp is off by 2e-4)."""
+        return self.native_error is not None and self.native_error <= NATIVE_EXACT
 
 
 @lru_cache(maxsize=1)
@@ -250,42 +325,57 @@ def _write_cache(path: Path, entries: dict) -> None:
 _chosen: dict = {}     # (cache file, device key) -> the choice made in this process
 
 
-def choose(info, override: int | None = None, probe: Callable[..., str | None] = run_probe,
+class UnusableDevice(RenderError):
+    """A CPU device whose driver passed the probe at no width: `failures`
+    are (width, why), `remembered` says the verdict came from the cache."""
+
+    def __init__(self, info, failures: tuple[tuple[int, str], ...], remembered: bool):
+        super().__init__(f"the OpenCL device '{info.name}' failed the lane probe at every width "
+                         f"({failures[-1][1]}); try another device (fractalc devices)")
+        self.info, self.failures, self.remembered = info, failures, remembered
+
+
+def choose(info, override: int | None = None, probe: Callable[..., ProbeFailure | ProbePassed] = run_probe,
            refresh: bool = False) -> LaneChoice:
-    """The lanes for device `info` (a build.DeviceInfo): `override`, else
+    """The lanes for device `info` (a devices.DeviceInfo): `override`, else
     $FRACTALC_LANES, else 1 on GPUs, else the cached or probed widest
-    width that builds and runs (16 -> 8 -> 4 -> 1)."""
-    if override is not None:
-        return LaneChoice(override, "set by --lanes")
-    if os.environ.get(ENVIRONMENT):
-        return LaneChoice(parse_lanes(os.environ[ENVIRONMENT], ENVIRONMENT), f"set by {ENVIRONMENT}")
-    if info.kind == "GPU":
-        return LaneChoice(1, "one ray per work-item on a GPU")
+    width that builds and runs (16 -> 8 -> 4 -> 1). A device that passes
+    at no width raises UnusableDevice; that verdict is cached too. An
+    override knows the driver's native_ functions only from an earlier
+    probe (else they count as inexact)."""
     path = cache_dir() / "lanes.json"
     key = device_key(info)
+    if override is not None or os.environ.get(ENVIRONMENT):
+        lanes, reason = ((override, "set by --lanes") if override is not None else
+                         (parse_lanes(os.environ[ENVIRONMENT], ENVIRONMENT), f"set by {ENVIRONMENT}"))
+        return LaneChoice(lanes, reason, native_error=(_read_cache(path).get(key) or {}).get("native_error"))
+    if info.kind == "GPU":
+        return LaneChoice(1, "one ray per work-item on a GPU")
     if not refresh and (path, key) in _chosen:
         return _chosen[path, key]
     entry = None if refresh else _read_cache(path).get(key)
-    if entry and entry.get("lanes") in WIDTHS:
-        choice = LaneChoice(entry["lanes"], "probed (cached)", tuple((w, why) for w, why in entry.get("failures", [])))
+    if entry and (entry.get("lanes") in WIDTHS or entry.get("lanes") is None and entry.get("failures")):
+        failures = tuple((w, why) for w, why in entry.get("failures", []))
+        if entry["lanes"] is None:
+            raise UnusableDevice(info, failures, remembered=True)
+        choice = LaneChoice(entry["lanes"], "probed (cached)", failures, entry.get("native_error"))
         _chosen[path, key] = choice
         return choice
-    failures = []
-    for width in WIDTHS:
-        why = probe(info.index, width, ("float", "double") if info.double else ("float",))
-        if why is None:
+    failures, width, native = [], None, None
+    for candidate in WIDTHS:
+        verdict = probe(info.index, candidate, ("float", "double") if info.double else ("float",))
+        if isinstance(verdict, ProbePassed):
+            width, native = candidate, verdict.native_error
             break
-        failures.append((width, why))
-    else:
-        width = None
-    if width is None:
-        from .errors import RenderError
-        raise RenderError(f"the OpenCL device '{info.name}' failed the lane probe at every width "
-                          f"({failures[-1][1]}); try another device (fractalc devices)")
+        failures.append((candidate, verdict.why))
+        if verdict.hopeless:
+            break
     entries = _read_cache(path)
-    entries[key] = {"lanes": width, "failures": failures}
+    entries[key] = {"lanes": width, "failures": failures, "native_error": native}
     _write_cache(path, entries)
-    _chosen[path, key] = LaneChoice(width, "probed", tuple(failures))
+    if width is None:
+        raise UnusableDevice(info, tuple(failures), remembered=False)
+    _chosen[path, key] = LaneChoice(width, "probed", tuple(failures), native)
     return _chosen[path, key]
 
 

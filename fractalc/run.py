@@ -16,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from .build import Device
+from .devices import Device
 from .emit import lane_block
 from .errors import RenderError
 from .memory import is_out_of_memory

@@ -70,7 +70,8 @@ def scene_settings(scene: Scene) -> dict:
     row repeats the scene's kernel)."""
     settings = {knob: getattr(scene.checked.render, knob) for knob in KNOBS}
     if settings["fast_math"] == "auto":
-        native = fast_math("auto", Target(lanes=scene.lanes_in_use))
+        native = fast_math("auto", Target(lanes=scene.lanes_in_use,
+                                          exact_native=scene.device.lane_choice.native_exact))
         settings["fast_math"] = "on" if native else "off"
     return settings
 

@@ -22,7 +22,7 @@
 #define native_log log
 #endif
 
-__kernel void probe(__global const scalar *in, __global scalar *out, int count) {
+__kernel VECTOR_LANES_HINT void probe(__global const scalar *in, __global scalar *out, int count) {
     int i = get_global_id(0);
     real x = LOAD_LANES(i, in);
     real y = LOAD_LANES(i, in + count);

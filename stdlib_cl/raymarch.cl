@@ -666,7 +666,7 @@ vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixe
 // pixel (x, y) at (y * pitch + x) * CHANNELS; pitch >= width and its row
 // count >= height are multiples of LANES_X and LANES_Y (blocks past the
 // image's edge write there).
-__kernel void render(__global float *out, __constant scalar *params,
+__kernel VECTOR_LANES_HINT void render(__global float *out, __constant scalar *params,
                      __constant scalar *camera, int width, int height,
                      int x0, int y0, int pitch, int samples, uint seed) {
     int gx = get_global_id(0), gy = get_global_id(1);
@@ -810,7 +810,7 @@ __kernel void render(__global float *out, __constant scalar *params,
 
 // Distance estimates at points: `points` holds count x's, then count y's,
 // then count z's (count a multiple of LANES); `distances` gets count values.
-__kernel void distance_at_points(__global const scalar *points, __global scalar *distances,
+__kernel VECTOR_LANES_HINT void distance_at_points(__global const scalar *points, __global scalar *distances,
                        __constant scalar *params, int count) {
     int i = get_global_id(0);
     vec3 p = v3(LOAD_LANES(i, points), LOAD_LANES(i, points + count),

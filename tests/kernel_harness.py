@@ -9,7 +9,7 @@ import numpy as np
 from fractalc.emit import double_literals, function_source
 
 _KERNEL = """
-__kernel void run(__global const scalar *x, __global const scalar *y, __global const scalar *z,
+__kernel VECTOR_LANES_HINT void run(__global const scalar *x, __global const scalar *y, __global const scalar *z,
                   __constant scalar *params, __global scalar *out) {
     int i = get_global_id(0);
     STORE_LANES(f(v3(LOAD_LANES(i, x), LOAD_LANES(i, y), LOAD_LANES(i, z)), params), i, out);

@@ -307,14 +307,16 @@ def test_top_level_help_lists_the_commands(tmp_path):
 def device_lines(tmp_path_factory):
     result = fractalc_cli("devices", cwd=tmp_path_factory.mktemp("devices"))
     assert result.returncode == 0, result.stderr
-    lines = result.stdout.strip().splitlines()
-    return lines
+    lines = [line for line in result.stdout.splitlines() if re.match(r"[* ] \d+: ", line)]
+    assert sum(line.startswith("*") for line in lines) == 1, "one device is marked the default"
+    return [line[2:] for line in lines]
 
 
 def test_devices_lists_at_least_one(device_lines):
     assert len(device_lines) >= 1
     assert device_lines[0].startswith("0")
     assert re.search(r"\b(CPU|GPU|other)\b", device_lines[0], re.I)
+    assert all("builds: " in line and "speed rank " in line for line in device_lines)
 
 
 def _render_with_device(directory, device):
@@ -394,7 +396,8 @@ def test_compile_writes_standalone_source(tmp_path):
     assert result.returncode == 0, result.stderr
     source = (tmp_path / "scene.cl").read_text()
     assert "#include" not in source
-    assert "__kernel void render(" in source and "__kernel void distance_at_points(" in source
+    assert "__kernel VECTOR_LANES_HINT void render(" in source
+    assert "__kernel VECTOR_LANES_HINT void distance_at_points(" in source
     assert "#define LANES 1\n" in source
     assert source == fractalc.load(tmp_path / "scene.frac").kernel_source(lanes=1).replace(
         str(tmp_path / "scene.frac"), "scene.frac")

@@ -19,7 +19,7 @@ import pytest
 import fractalc
 from fractalc import animate, api, cluster
 from fractalc.errors import RenderError
-from fractalc.lanes import cache_dir
+from fractalc.cache import cache_dir
 from test_animate import SCENE   # 32x24, a path of 1 s
 
 oiio = pytest.importorskip("OpenImageIO")

@@ -30,7 +30,7 @@ render { width: 48, height: 36, dither: 0 }
 """
 
 UNIFORM_KERNEL = """
-__kernel void uniform_at_points(__global const scalar *points, __global scalar *distances,
+__kernel VECTOR_LANES_HINT void uniform_at_points(__global const scalar *points, __global scalar *distances,
                                 __constant scalar *params, int count) {
     int i = get_global_id(0);
     distances[i] = uniform_distance_estimate(uniform_v3(points[i], points[i + count], points[i + 2 * count]),

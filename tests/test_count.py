@@ -174,7 +174,7 @@ def test_every_evaluation_in_the_counting_build_is_counted():
     code = "\n".join(line for line in source.splitlines() if not line.lstrip().startswith("//"))
     functions = re.split(r"\n(?=\S)", code)
     evaluating = [f for f in functions if "distance_estimate(" in f.split("{", 1)[-1]
-                  and not f.startswith(("real distance_estimate(", "__kernel void distance_at_points("))]
+                  and not f.startswith(("real distance_estimate(", "__kernel VECTOR_LANES_HINT void distance_at_points("))]
     assert len(evaluating) >= 6       # march, normals, AO, both shadows, refraction
     for function in evaluating:
         assert "count_evaluations(" in function, function.split("\n", 1)[0]

@@ -125,17 +125,36 @@ CASES = [
 ]
 
 
-def load(text, precision, params):
+def load(text, precision, params, device=None):
     kwargs = {} if precision == "float" else {"precision": precision}
     if params is not None:
         kwargs["params"] = params
-    return fractalc.loads(text, **kwargs)
+    return fractalc.loads(text, device=device, **kwargs)
 
 
 @pytest.mark.parametrize("precision", ["float", "double"])
 @pytest.mark.parametrize("text, params, expected", CASES)
 def test_distance_matches_reference(text, params, expected, precision):
-    d = np.asarray(load(text, precision, params).distance(POINTS), dtype=np.float64)
+    assert_matches(load(text, precision, params), expected, precision)
+
+
+# one case of each kind: primitives, smooth combinations, positioning,
+# deformations, params (the whole table runs on the default device)
+EVERY_DRIVER = [c for c in CASES if c.id in (
+    "scene sphere()", "scene capsule((1, 0, 0), (-1, 1, 0.5), 0.3)",
+    f"scene union({A}, {B}, {C}, smooth: 0.4)", f"scene {A} - {B} - {C}",
+    f"scene {BOX}.twist(0.5).rotate((0, 1, 1), 45).bend(0.2)",
+    f"param a = 30 in [0, 360]; scene {BOX}.rotate((1, 2, 3), a) {{'a': 100}}")]
+
+
+@pytest.mark.parametrize("precision", ["float", "double"])
+@pytest.mark.parametrize("text, params, expected", EVERY_DRIVER)
+def test_distance_matches_reference_on_every_driver(text, params, expected, precision, driver):
+    assert_matches(load(text, precision, params, driver), expected, precision)
+
+
+def assert_matches(scene, expected, precision):
+    d = np.asarray(scene.distance(POINTS), dtype=np.float64)
     want = expected(POINTS)
     assert d.shape == want.shape
     compared = np.abs(want) > NEAR_SURFACE[precision]

@@ -142,7 +142,7 @@ def orbit_ir(case: Case, jacobian=None, julia=None, constants=True):
 
 
 _KERNEL = """
-__kernel void k_{name}(__global const scalar *x, __global const scalar *y, __global const scalar *z,
+__kernel VECTOR_LANES_HINT void k_{name}(__global const scalar *x, __global const scalar *y, __global const scalar *z,
                        __constant scalar *params, __global scalar *out) {{
     int i = get_global_id(0);
     out[i] = f_{name}(v3(x[i], y[i], z[i]), params);

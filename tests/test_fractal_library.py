@@ -22,7 +22,7 @@ FLOOR = 1e-3                                   # relative to max(|reference|, FL
 SLACK = {"float": 1e-5, "double": 1e-12}       # lower bounds may exceed the truth by this
 
 _KERNELS = """
-__kernel void evaluate(__global const scalar *x, __global const scalar *y, __global const scalar *z,
+__kernel VECTOR_LANES_HINT void evaluate(__global const scalar *x, __global const scalar *y, __global const scalar *z,
                        __constant scalar *params, __global scalar *out) {{
     int i = get_global_id(0);
     vec3 p = v3(LOAD_LANES(i, x), LOAD_LANES(i, y), LOAD_LANES(i, z));
@@ -55,7 +55,7 @@ def _program(name, lanes, precision):
     """The built program of NAME's DE (emitted from its IR) and its bound,
     with kernels `evaluate` (the DE at points) and `bound` (the radius)."""
     import pyopencl as cl
-    from fractalc.build import open_device
+    from fractalc.devices import open_device
     lib = library()
     args = _arguments(name)
     point = ir.components(ir.Var("p", ir.VEC3))

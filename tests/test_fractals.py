@@ -42,10 +42,10 @@ def builds():
 
 
 @lru_cache(maxsize=None)
-def scene(text, precision="float"):
+def scene(text, precision="float", device=None):
     """A loaded scene, shared by the tests (params are mutable: a test sets
     every param it relies on)."""
-    return fractalc.loads(text, precision=precision)
+    return fractalc.loads(text, precision=precision, device=device)
 
 
 # ---------------------------------------------------------------- numpy references
@@ -178,9 +178,9 @@ def _region(name, kwargs, count=10_000, seed=20240607):
 
 @pytest.mark.parametrize("precision", PRECISIONS)
 @pytest.mark.parametrize("name", FRACTALS)
-def test_default_fractal_matches_reference(name, precision):
+def test_default_fractal_matches_reference(name, precision, driver):
     points = _region(name, {})
-    d = scene(f"scene {name}()", precision).distance(points)
+    d = scene(f"scene {name}()", precision, driver).distance(points)
     assert np.isfinite(d).all()
     error = p99(d, reference_de(name, points))
     print(f"\nFIGURE default {name} {precision}: p99 relative error {error:.3g}")
@@ -602,8 +602,8 @@ def reference_depth(name):
 
 
 @pytest.mark.parametrize("name", FRACTALS)
-def test_depth_map_matches_a_numpy_sphere_tracer(name):
-    image = scene(camera_scene(f"scene {name}()", CAMERAS[name])).render(width=W, height=H)
+def test_depth_map_matches_a_numpy_sphere_tracer(name, driver):
+    image = scene(camera_scene(f"scene {name}()", CAMERAS[name]), device=driver).render(width=W, height=H)
     expected, _ = reference_depth(name)
     hit, expected_hit = np.isfinite(image.depth), np.isfinite(expected)
     agreement = np.mean(hit == expected_hit)

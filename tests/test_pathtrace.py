@@ -25,7 +25,8 @@ def furnace(albedo: float, **build):
 
 
 @pytest.mark.parametrize("build", [{}, {"lanes": 1}, {"precision": "double"}])
-def test_white_furnace(build):
+def test_white_furnace(build, driver):
+    build = dict(build, device=driver)
     # a convex diffuse sphere in radiance 1: each path scatters once and
     # escapes, so every sample of a covered pixel is exactly the albedo
     # (zero Monte Carlo error) and an albedo-1 sphere vanishes

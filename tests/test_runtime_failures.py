@@ -23,9 +23,11 @@ def _fractalc(*args, cwd, env=None):
 @pytest.mark.parametrize("command", [["devices"], ["render", "scene.frac", "-o", "out.png"]])
 def test_no_opencl_platform_says_how_to_install_pocl(tmp_path, command):
     (tmp_path / "scene.frac").write_text(SCENE)
-    result = _fractalc(*command, cwd=tmp_path, env={"OCL_ICD_VENDORS": str(tmp_path / "no-vendors")})
+    result = _fractalc(*command, cwd=tmp_path, env={"OCL_ICD_VENDORS": str(tmp_path / "no-vendors"),
+                                                    "FRACTALC_BUNDLED_DRIVERS": "0"})
     assert result.returncode == 1
     assert "pocl" in result.stderr.lower() and "Traceback" not in result.stderr
+    assert "pip install intel-opencl-rt intel-cmplr-lib-rt" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out.png").exists()
 
