@@ -26,7 +26,7 @@ from .emit import Target, emit, uniform_source
 from .errors import RenderError, SceneError, diagnostic
 from .lanes import CHOICES as LANE_CHOICES
 from .lower import lower
-from .memory import require
+from .memory import require_memory
 from .parse import parse
 from .passes import PASSES, channels
 from .program import Camera, CheckedScene, RenderSettings
@@ -36,7 +36,7 @@ from .write import COMPRESSIONS, write
 PRECISIONS = ("float", "double")
 # change without rebuilding (exposure and tonemap: only PNG writing reads them)
 _RUNTIME_KEYS = {"width", "height", "samples", "exposure", "tonemap"}
-CAMERA_TYPES = program.Camera    # a file's camera, or a fractalc.Camera made from Python
+CAMERA_BASE = program.Camera    # a file's camera and a fractalc.Camera made from Python alike
 SCENE_TEXT_LIMIT = 64 * 1024   # longer scene text is left out of the metadata (its sha256 and path stay)
 
 
@@ -241,7 +241,7 @@ class Scene:
         """Replace the file's camera and render settings (any render key,
         checked as `render` checks it) for every later render."""
         if camera is not None:
-            require_type("camera", camera, CAMERA_TYPES, "a fractalc.Camera")
+            require_type("camera", camera, CAMERA_BASE, "a fractalc.Camera")
         self.checked = replace(self.checked, render=self._settings(render_keys),
                                camera=camera or self.checked.camera)
 
@@ -262,7 +262,8 @@ class Scene:
             if key == "aovs":    # not a file's key: passes to add to the default channels
                 if isinstance(value, str):
                     raise ValueError(f"aovs must be a list of pass names, not the string {value!r}")
-                require_type("aovs", value, (list, tuple, set, frozenset), f"a list of pass names ({', '.join(PASSES)})")
+                require_type("aovs", value, (list, tuple, set, frozenset),
+                             f"a list of pass names ({', '.join(PASSES)})")
                 for name in value:
                     require_type("a pass in aovs", name, str, f"a pass name ({', '.join(PASSES)})")
                 channels(value)     # raises ValueError naming an unknown pass
@@ -328,7 +329,7 @@ class Scene:
         require_type("seed", seed, (int, np.integer), "a whole number")
         seed = checked("seed", seed)
         if camera is not None:
-            require_type("camera", camera, CAMERA_TYPES, "a fractalc.Camera")
+            require_type("camera", camera, CAMERA_BASE, "a fractalc.Camera")
         if cluster is not None:
             if not all(hasattr(cluster, name) for name in ("submit", "nthreads")):
                 raise TypeError(f"cluster must be a Dask client (distributed.Client), not {cluster!r:.60}")
@@ -412,7 +413,7 @@ def require_image_memory(width: int, height: int, channel_count: int, path_trace
     naming its width and height), before any work: its float32 channels,
     twice and its double sums where path-traced (fractalc.pathtrace)."""
     pixel = 4 * channel_count * (2 if path_traced else 1) + (PATH_TRACED_PIXEL_BYTES if path_traced else 0)
-    require(width * height * pixel, f"an image of width {width} and height {height} ({channel_count} channels)")
+    require_memory(width * height * pixel, f"an image of width {width} and height {height} ({channel_count} channels)")
 
 
 def loads(text: str, params: dict | None = None, precision: str | None = None,

@@ -427,7 +427,8 @@ def command_mesh(args) -> int:
     try:
         bounds_of(scene, args.bounds, args.resolution, "--bounds")
     except ValueError as error:
-        raise UsageError(str(error) if args.bounds else f"{error} with --bounds=XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX") from None
+        raise UsageError(str(error) if args.bounds else
+                         f"{error} with --bounds=XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX") from None
     start = time.perf_counter()
     try:
         mesh = scene.mesh(resolution=args.resolution, bounds=args.bounds, progress=not args.quiet)
@@ -496,7 +497,8 @@ def _parser() -> argparse.ArgumentParser:
     render.add_argument("-o", "--output", required=True, help="output image (.exr, .png, ...)")
     render.add_argument("--half", action="store_true", help="EXR: half-float channels (Z and P stay float)")
     render.add_argument("--compression", choices=COMPRESSIONS, help="EXR compression (default zip)")
-    render.add_argument("--bits", type=_option("bits"), choices=(8, 16), default=8, help="PNG: bits per channel (default 8)")
+    render.add_argument("--bits", type=_option("bits"), choices=(8, 16), default=8,
+                        help="PNG: bits per channel (default 8)")
     image_options(render)
     render.set_defaults(run=command_render)
 
@@ -535,8 +537,9 @@ def _parser() -> argparse.ArgumentParser:
     bench_.add_argument("--width", type=_option("width"))
     bench_.add_argument("--height", type=_option("height"))
     bench_.add_argument("--resolution", help="1366x768, 1920x1080, 2560x1440, 3840x2160 (or 720p, 1080p, 1440p, 4k)")
-    bench_.add_argument("--repeat", type=_option("repeat"), help="runs of the whole path; figures are medians (default 1); "
-                                                   "with --sweep, timed renders per row (default 5)")
+    bench_.add_argument("--repeat", type=_option("repeat"),
+                        help="runs of the whole path; figures are medians (default 1); "
+                             "with --sweep, timed renders per row (default 5)")
     bench_.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
     bench_.add_argument("--still", action="store_true",
                         help="render the file's own camera view every frame (no path, no orbit)")

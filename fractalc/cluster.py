@@ -35,7 +35,7 @@ import numpy as np
 from .api import Image, Scene, image_from_pixels, loads, require_image_memory
 from .arguments import checked
 from .errors import RenderError
-from .memory import require
+from .memory import require_memory
 
 MISSING_EXTRA = "--workers and --cluster need Dask's distributed: pip install 'fractalc[cluster]'"
 # A local worker's memory before it renders: its process (145 MB resident
@@ -78,7 +78,7 @@ def require_workers_memory(workers: int | None) -> None:
     """Refuse a local cluster whose worker processes alone need more memory
     than the machine has (RenderError naming `workers`)."""
     if workers is not None:
-        require(checked("workers", workers) * WORKER_BYTES, f"a local cluster of {workers} workers")
+        require_memory(checked("workers", workers) * WORKER_BYTES, f"a local cluster of {workers} workers")
 
 
 @contextlib.contextmanager

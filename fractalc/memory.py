@@ -55,7 +55,7 @@ def size_text(count: float) -> str:
     return f"{count / 1024:.3g} KiB"
 
 
-def require(needed: float, what: str) -> None:
+def require_memory(needed: float, what: str) -> None:
     """Refuse work estimated to need `needed` bytes, more than this process
     can have: a RenderError, 'out of memory: WHAT needs ...'."""
     have = available()

@@ -27,7 +27,7 @@ import numpy as np
 
 from .arguments import MAX_RESOLUTION, checked
 from .lower import MAX_COORDINATE
-from .memory import require
+from .memory import require_memory
 from .write import replacing
 
 FORMATS = (".stl", ".ply", ".obj")
@@ -247,7 +247,8 @@ def mesh(scene, resolution: int = DEFAULT_RESOLUTION, bounds=None, progress: boo
     require_scikit_image()
     resolution = checked("resolution", resolution)
     grid = Grid.over(*bounds_of(scene, bounds, resolution), resolution)
-    require(grid.sampling_bytes(chunk_points), f"meshing at resolution {resolution} ({' x '.join(map(str, grid.counts))} samples)")
+    require_memory(grid.sampling_bytes(chunk_points),
+                   f"meshing at resolution {resolution} ({' x '.join(map(str, grid.counts))} samples)")
     level = grid.spacing * LEVEL_CELLS
     vertices, faces = _march(scene, grid, level, progress, chunk_points)
     normals = _normals(scene, vertices, grid.spacing, chunk_points)

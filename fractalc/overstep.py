@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arguments import checked
-from .memory import require
+from .memory import require_memory
 
 # memory per sample along the rays: the estimates (float64), whether each
 # is inside (bool), the ratios compared (float64)
@@ -61,7 +61,7 @@ def measure(scene, rays: int = 400, steps: int = 1500, seed: int = 0, surface: f
     need not reach 0 inside: the Mandelbox's is 1e-5 there after 12
     iterations)."""
     rays, seed, surface = checked("rays", rays), checked("seed", seed), checked("surface", surface)
-    require(rays * steps * SAMPLE_BYTES, f"measuring along {rays} rays of {steps} steps")
+    require_memory(rays * steps * SAMPLE_BYTES, f"measuring along {rays} rays of {steps} steps")
     if scene.device.info.double and scene.precision != "double":
         from .api import Scene
         scene = Scene(scene.checked, scene.params, precision="double", device=scene.device_spec, lanes=scene.lanes)

@@ -108,7 +108,8 @@ def _map_texels(path: str, modified: float) -> np.ndarray:
                   * np.bincount(columns, minlength=MAP_WIDTH)[None, :])[..., None]
         sums = np.zeros((MAP_HEIGHT, MAP_WIDTH, 3))
         # a map smaller than the table: the nearest pixel where none falls
-        near_rows, near_columns = np.arange(MAP_HEIGHT) * height // MAP_HEIGHT, np.arange(MAP_WIDTH) * width // MAP_WIDTH
+        near_rows = np.arange(MAP_HEIGHT) * height // MAP_HEIGHT
+        near_columns = np.arange(MAP_WIDTH) * width // MAP_WIDTH
         nearest = np.zeros((MAP_HEIGHT, MAP_WIDTH, 3))
         step = max(1, MAP_READ_BYTES // (width * 12))
         for first in range(0, height, step):

@@ -516,7 +516,7 @@ def test_a_hybrid_past_its_steps_is_refused_where_it_passes_them():
     with pytest.raises(fractalc.SceneError) as error:      # repeat counts count
         fractalc.loads("scene fractal(hybrid(bulb() * 100, amazing_box() * 100) * 2, bound: 4)")
     assert error.value.column == 59
-    fractalc.loads(f"scene fractal(hybrid(bulb() * 100, amazing_box() * 100, bulb(9) * 56), bound: 4)")
+    fractalc.loads("scene fractal(hybrid(bulb() * 100, amazing_box() * 100, bulb(9) * 56), bound: 4)")
 
 
 FORMULA_WITH = "formula f() {{\n    z = 2 * z + c\n    final distance = {}\n}}\nscene fractal(f(), iterations: 4, bound: 2)\n"
