@@ -823,3 +823,17 @@ def test_a_path_too_long_for_its_fps_is_refused_before_any_frame(tmp_path, capsy
     printed = _usage_error(["animate", str(scene), "-o", str(tmp_path / "f_%d.png")], capsys)
     assert "fps 30: the path's 1e+30 s would be 3e+31 frames, more than 1000000" in printed
     assert [p.name for p in tmp_path.iterdir()] == ["scene.frac"]
+
+
+@pytest.mark.parametrize("arguments, error, name", [
+    ({"workers": 0}, ValueError, "'workers'"), ({"workers": -1}, ValueError, "'workers'"),
+    ({"workers": 10 ** 400}, ValueError, "'workers'"), ({"workers": "2"}, ValueError, "'workers'"),
+    ({"workers": object()}, ValueError, "'workers'"), ({"address": 3}, TypeError, "address"),
+    ({"address": b"tcp://h:1"}, TypeError, "address"), ({"address": "tls://h:1"}, ValueError, "tls://"),
+])
+def test_connecting_to_a_cluster_answers_wrong_arguments_before_starting_one(arguments, error, name):
+    pytest.importorskip("distributed")
+    from fractalc import cluster
+    with pytest.raises(error, match=re.escape(name)):
+        with cluster.connect(**arguments):
+            pytest.fail("a cluster started")
