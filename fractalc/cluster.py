@@ -96,8 +96,12 @@ def connect(workers: int | None = None, address: str | None = None):
         with _ctrl_c_ignored(), warnings.catch_warnings():
             # the scheduler's HTTP routes move to a free port: no dashboard is shown anyway
             warnings.filterwarnings("ignore", message="Port 8787 is already in use")
-            cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                               dashboard_address=None, silence_logs=logging.ERROR)
+            try:
+                cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                   dashboard_address=None, silence_logs=logging.ERROR)
+            except (RuntimeError, OSError, TimeoutError) as error:     # a worker that did not start
+                raise RenderError(f"cannot start a local Dask cluster of {workers or 'the default'} workers: "
+                                  f"{_first_line(_root_cause(error))}") from None
         with cluster, distributed.Client(cluster) as client:
             yield client
         return
@@ -107,6 +111,14 @@ def connect(workers: int | None = None, address: str | None = None):
         raise RenderError(f"cannot reach the Dask scheduler at {address}: {_first_line(error)}") from None
     with client:
         yield client
+
+
+def _root_cause(error: BaseException) -> BaseException:
+    """The exception at the bottom of `error`'s chain, through the causes and
+    what they were raised while handling (Dask's own says 'Nanny failed to start')."""
+    while (error.__cause__ or error.__context__) is not None:
+        error = error.__cause__ or error.__context__
+    return error
 
 
 def _first_line(error: BaseException) -> str:

@@ -278,7 +278,8 @@ class Runner:
         import multiprocessing
         context = multiprocessing.get_context("spawn")
         self.connection, theirs = context.Pipe()
-        self.server = context.Process(target=_serve, args=(theirs, headroom), daemon=True)
+        # not a daemon: a daemon process may not start processes (a case's local cluster)
+        self.server = context.Process(target=_serve, args=(theirs, headroom))
 
     def __enter__(self):
         self.server.start()

@@ -837,3 +837,21 @@ def test_connecting_to_a_cluster_answers_wrong_arguments_before_starting_one(arg
     with pytest.raises(error, match=re.escape(name)):
         with cluster.connect(**arguments):
             pytest.fail("a cluster started")
+
+
+def test_a_local_cluster_that_cannot_start_is_one_line(monkeypatch):
+    """Found by the fuzzer (a daemon process may not start workers): Dask's
+    'Nanny failed to start' RuntimeError, its cause said in words."""
+    distributed = pytest.importorskip("distributed")
+    from fractalc import cluster
+
+    def failing(**kwargs):
+        try:
+            raise AssertionError("daemonic processes are not allowed to have children")
+        except AssertionError as cause:
+            raise RuntimeError("Nanny failed to start.") from cause
+    monkeypatch.setattr(distributed, "LocalCluster", failing)
+    with pytest.raises(fractalc.RenderError, match="^cannot start a local Dask cluster of 2 workers: daemonic "
+                                                   "processes are not allowed to have children$"):
+        with cluster.connect(workers=2):
+            pass
