@@ -165,11 +165,13 @@ def plan_frames(scene: Scene, pattern: str, fps: float, seed: int, overwrite: bo
     return FramePlan(path, times, files, settings, missing, chosen)
 
 
-def render_frame(scene: Scene, path, time: float, seed: int, render_keys: dict):
+def render_frame(scene: Scene, path, time: float, seed: int, render_keys: dict, progress=False):
     """The frame at `time` on `path` as an Image (its params and camera
-    from the path; the scene's params are left at the frame's)."""
+    from the path; the scene's params are left at the frame's);
+    `progress` as for `Scene.render`."""
     scene.set_params(params_at(path, time))
-    return scene.render(seed=seed, camera=camera_at(path, scene.checked.camera, time), **render_keys)
+    return scene.render(seed=seed, camera=camera_at(path, scene.checked.camera, time), progress=progress,
+                        **render_keys)
 
 
 def save_frame(image, plan: FramePlan, index: int) -> None:

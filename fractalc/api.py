@@ -182,6 +182,14 @@ class Scene:
         check_param_values(self.checked, [changed[p.name] for p in self.checked.params])
         self.params = changed
 
+    def apply_preset(self, name: str) -> None:
+        """Set the params a `preset NAME { ... }` of the file gives to its
+        values (the others keep theirs); a ValueError names an unknown preset."""
+        presets = {preset.name: preset for preset in self.checked.presets}
+        if name not in presets:
+            raise ValueError(f"the scene has no preset '{name}' (its presets: {', '.join(presets) or 'none'})")
+        self.set_params(dict(presets[name].params))
+
     def _param_values(self) -> list[float]:
         return [self.params[p.name] for p in self.checked.params]
 
@@ -312,14 +320,17 @@ class Scene:
         from .mesh import mesh
         return mesh(self, resolution, bounds, progress)
 
-    def render(self, seed: int = 0, progress: bool = False, camera: Camera | None = None,
+    def render(self, seed: int = 0, progress=False, camera: Camera | None = None,
                cluster=None, denoise: bool = False, **render_keys) -> Image:
         """Render with the file's settings, overridden by keyword (any render
         key: width=, height=, samples=, ao=, max_steps=, ...); `camera`
         replaces the file's camera (no rebuild); `aovs` names the passes
         to add to the default channels (passes.PASSES: P, diffuse, ...).
         `cluster`: a Dask client (distributed.Client) whose workers render
-        the image in row tiles (docs/cluster.md). `denoise`: the colour
+        the image in row tiles (docs/cluster.md). `progress`: True for a
+        bar on the terminal, or a function called with the pixels done and
+        the total after each tile (an exception it raises stops the
+        render). `denoise`: the colour
         denoised by Intel Open Image Denoise (the 'denoise' extra), guided
         by the albedo pass, which the image then has (docs/looks.md)."""
         if denoise:
@@ -344,7 +355,9 @@ class Scene:
                           run.camera_block(camera))
         path_traced = settings.integrator == "path"    # in passes of samples (pathtrace.pass_frames)
         passes = len(pathtrace.pass_frames(frame)) if path_traced else 1
-        bar = run.terminal_progress(settings.width * settings.height * passes) if progress else None
+        total = settings.width * settings.height * passes
+        bar = run.ProgressReporter(progress, total) if callable(progress) else \
+            run.terminal_progress(total) if progress else None
         start = time.perf_counter()
         try:
             def render_frame(part):

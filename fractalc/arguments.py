@@ -26,7 +26,8 @@ ARGUMENTS = {p.name: p for p in (
     Parameter("repeat", "int", None, ("1..1000",)),                   # bench
     Parameter("resolution", "int", None, (f"2..{MAX_RESOLUTION}",)),  # mesh
     Parameter("workers", "int", None, ("1..1024",)),                  # a local render farm
-    Parameter("preview_scale", "int", None, ("1..64",)),              # view
+    Parameter("preview_scale", "int", None, ("1..64",)),              # view, studio
+    Parameter("port", "int", None, ("0..65535",)),                    # studio (0: any free port)
     Parameter("bits", "int", None, ("8..16",)),                       # PNG output: 8 or 16
     replace(RENDER_KEYS["samples"], name="max_samples"),              # view: a still's samples
     replace(RENDER_KEYS["height"], name="tile_rows"),                 # a render farm's tiles

@@ -174,6 +174,15 @@ class PathDecl:
     span: Span
 
 
+@node
+class PresetDecl:
+    """`preset NAME { param: value, ... }`: param values saved under a name."""
+    name: str
+    name_span: Span
+    block: Block
+    span: Span
+
+
 # ---- formulas ----------------------------------------------------------------
 
 @node
@@ -209,7 +218,7 @@ class FormulaDecl:
 
 
 Decl = Union[ParamDecl, LetDecl, MaterialDecl, SceneDecl, CameraDecl, LightDecl, RenderDecl, PathDecl,
-             FormulaDecl]
+             PresetDecl, FormulaDecl]
 
 
 @node

@@ -13,12 +13,14 @@ import itertools
 import math
 import os
 from dataclasses import dataclass, replace
+from enum import Enum
 
 from . import ast, formula_code, ir, pathtrace
 from .errors import Diagnostic, SceneError, Span, diagnostic
 from .program import (DEFAULT_MATERIAL, PROJECTIONS, STEREO_LAYOUTS, Camera, CameraPath, CheckedScene, Coloring,
                       Combination, Environment, Fog, Fractal, Glow, Keyframe, Light, Material, ParamCheck, ParamInfo,
-                      Primitive, RenderSettings, Shape, Slice, Transformed, WithMaterial, cosine_palette)
+                      Preset, Primitive, RenderSettings, Shape, Slice, Transformed, WithMaterial, cosine_palette,
+                      light_vector_key)
 from .parse import parse
 from .resources import resource_dir
 from .stdlib import COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
@@ -149,11 +151,12 @@ class _Checker:
         lights = tuple(self.light(d) for d in decls if isinstance(d, ast.LightDecl))
         render = self.render(singles.get(ast.RenderDecl))
         path = self.path(singles.get(ast.PathDecl))
+        presets = self.presets([d for d in decls if isinstance(d, ast.PresetDecl)])
         if self.errors:
             raise SceneError(self.errors)
         scene = CheckedScene(self.program.file, self.program.source, tuple(self.params.values()),
                              self.materials, shape, camera, tuple(l for l in lights if l), render,
-                             tuple(self.param_checks), path)
+                             tuple(self.param_checks), path, presets)
         check_param_values(scene, [p.default for p in scene.params])
         return scene
 
@@ -851,7 +854,7 @@ class _Checker:
             self.error(decl.kind_span, f"unknown light kind '{decl.kind}' (known: {', '.join(LIGHT_KEYS)})")
             return None
         found = self.entries(decl.block, keys, "light")
-        vector_key = "direction" if decl.kind == "directional" else "position"
+        vector_key = light_vector_key(decl.kind)
         needed = (vector_key, "direction") if decl.kind in ("spot", "rectangle") else (vector_key,)
         if any(key not in found for key in needed):
             for key in needed:
@@ -879,9 +882,8 @@ class _Checker:
         # the camera keys a path animates (a projection and stereo layout are the block's)
         animated = [key for key in CAMERA_KEYS if key in Keyframe.__dataclass_fields__]
         keys = {key: CAMERA_KEYS[key] for key in animated}
-        for name, info in self.params.items():
-            in_range = (f"{info.low!r}..{info.high!r}",) if None not in (info.low, info.high) else ()
-            keys.setdefault(name, _P(name, "num", None, *in_range))
+        for name, key in self.param_keys().items():
+            keys.setdefault(name, key)
         keyframes = []
         for before, frame in zip((None,) + decl.keyframes, decl.keyframes):
             if not in_float_range(frame.time):
@@ -902,6 +904,28 @@ class _Checker:
         if len(decl.keyframes) < 2:
             self.error(decl.span, f"a path needs at least two keyframes, this one has {len(decl.keyframes)}")
         return CameraPath(tuple(keyframes), decl.span)
+
+    def param_keys(self) -> dict[str, Parameter]:
+        """The params as block keys (a path's keyframes, presets): a
+        constant number in the param's range."""
+        keys = {}
+        for name, info in self.params.items():
+            in_range = (f"{info.low!r}..{info.high!r}",) if None not in (info.low, info.high) else ()
+            keys[name] = _P(name, "num", None, *in_range)
+        return keys
+
+    def presets(self, decls: list[ast.PresetDecl]) -> tuple[Preset, ...]:
+        """Each `preset NAME { param: value, ... }`: constant values of
+        params, in their ranges; one preset of each name."""
+        keys, found = self.param_keys(), {}
+        for decl in decls:
+            if decl.name in found:
+                first = found[decl.name].span
+                self.error(decl.name_span, f"a second preset '{decl.name}' (the first is at line {first.line})")
+                continue
+            values = self.entries(decl.block, keys, "preset")
+            found[decl.name] = Preset(decl.name, tuple(values.items()), decl.span)
+        return tuple(found.values())
 
 
 def _source_text(program: ast.Program, span: Span) -> str:
@@ -1009,6 +1033,68 @@ RENDER_KEYS = _keys(
     _P("exposure", "num", None, "-20..20"), _P("tonemap", "word:none|reinhard|aces"),
     _P("integrator", "word:direct|path"), _P("bounces", "int", None, "1..64"),
     _P("environment", "block:environment"))
+
+
+# The vector keys that are colours (r, g, b): what a colour picker sets.
+COLOUR_KEYS = frozenset({"color", "background", "zenith", "horizon", "ground"})
+
+
+class KeyKind(Enum):
+    """What a block key takes (besides the words it names)."""
+    NUMBER = "number"
+    WHOLE = "whole number"
+    VECTOR = "3-vector"
+    WORD = "word"           # one of its words only
+    BLOCK = "block"         # a block of keys of its own
+    FILE = "file"           # a file name in quotes
+
+
+@dataclass(frozen=True)
+class KeySpec:
+    """A key of a block as an editor's control sees it (`key_specs`)."""
+    name: str
+    kind: KeyKind
+    words: tuple[str, ...] = ()     # the words it takes
+    low: float | None = None        # its range, None: open on that side
+    high: float | None = None
+    low_excluded: bool = False      # `> low` rather than `>= low`
+    high_excluded: bool = False
+    colour: bool = False            # an (r, g, b) colour
+    keys: tuple["KeySpec", ...] = ()   # a block's keys
+
+
+def key_specs(block: str) -> tuple[KeySpec, ...]:
+    """The keys of a block, their types and ranges from the checker's own
+    tables: `block` is "render", "camera", "material" or "light KIND"."""
+    kind, _, light = block.partition(" ")
+    tables = {"render": RENDER_KEYS, "camera": CAMERA_KEYS, "material": MATERIAL_KEYS}
+    keys = LIGHT_KEYS.get(light) if kind == "light" else tables.get(block)
+    if keys is None:
+        raise ValueError(f"no block '{block}' (blocks: {', '.join(tables)}, light {'|'.join(LIGHT_KEYS)})")
+    return tuple(_key_spec(parameter) for parameter in keys.values())
+
+
+def _key_spec(parameter: Parameter) -> KeySpec:
+    if parameter.type in BLOCK_KEYS:
+        nested = BLOCK_KEYS[parameter.type][0]
+        return KeySpec(parameter.name, KeyKind.BLOCK, keys=tuple(_key_spec(p) for p in nested.values()))
+    if parameter.type == "file":
+        return KeySpec(parameter.name, KeyKind.FILE)
+    words, other = (), parameter.type
+    if parameter.type.startswith("word:"):
+        words = tuple(c for c in parameter.type[5:].split("|") if c not in _WORD_ALTERNATIVES)
+        other = _word_alternative(parameter.type[5:].split("|"))
+    kind = {None: KeyKind.WORD, "int": KeyKind.WHOLE, "vec3": KeyKind.VECTOR}.get(other, KeyKind.NUMBER)
+    bounds: dict = {}
+    for c in parameter.constraints:
+        if ".." in c:
+            bounds["low"], bounds["high"] = (float(x) for x in c.split(".."))
+        elif c[0] in "<>" and not c.lstrip("<>=")[:1].isalpha():    # not a bound by another argument
+            side = "low" if c[0] == ">" else "high"
+            bounds[side] = float(c.lstrip("<>="))
+            bounds[f"{side}_excluded"] = c[1] != "="
+    return KeySpec(parameter.name, kind, words, colour=kind is KeyKind.VECTOR and parameter.name in COLOUR_KEYS,
+                   **bounds)
 
 
 # `fractal(formula, ...)`: the shape of a formula (docs/formulas.md). The

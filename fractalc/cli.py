@@ -142,6 +142,12 @@ def _load(args):
     keys = _keys_given(args) if hasattr(args, "render") else None
     scene = loads(text, params=params, precision=getattr(args, "precision", None),
                   device=getattr(args, "device", None), path=args.scene)
+    if getattr(args, "preset", None):
+        try:
+            scene.apply_preset(args.preset)
+        except ValueError as error:
+            raise UsageError(f"--preset {args.preset}: {error}") from None
+        scene.set_params(params)      # --set wins over the preset
     if keys:
         _configure(scene, keys)
     return scene
@@ -346,6 +352,31 @@ def command_view(args) -> int:
     return 0
 
 
+def _size(text: str) -> tuple[int, int]:
+    """WIDTHxHEIGHT, each in the range of a render's width and height."""
+    from .arguments import checked
+    width, x, height = text.lower().partition("x")
+    if not (x and width.isascii() and width.isdigit() and height.isascii() and height.isdigit()):
+        raise argparse.ArgumentTypeError(f"'{text}' is not a size WIDTHxHEIGHT such as 320x180")
+    try:
+        return checked("width", int(width)), checked("height", int(height))
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(f"'{text}': {error}") from None
+
+
+def command_studio(args) -> int:
+    _require_file(args.scene)
+    from .studio import MISSING_EXTRA, installed
+    if not installed():
+        raise RenderError(MISSING_EXTRA)
+    from .studio.server import serve
+    from .studio.session import Options
+    options = Options(args.device, args.precision, args.preview_scale, args.max_samples, args.live_size,
+                      _parse_set(args.set))
+    serve(args.scene, options, args.host, args.port, open_browser=not args.no_browser)
+    return 0
+
+
 def _frame_range(text: str) -> tuple[int, int | None]:
     from .animate import parse_frame_range
     try:
@@ -468,6 +499,8 @@ def _parser() -> argparse.ArgumentParser:
 
     def image_options(p):
         key_options(p)
+        p.add_argument("--preset", metavar="NAME", help="the param values of the file's 'preset NAME' "
+                                                       "(--set still wins)")
         p.add_argument("--width", type=_option("width"))
         p.add_argument("--height", type=_option("height"))
         p.add_argument("--samples", type=_option("samples"), help="anti-aliasing samples per pixel")
@@ -579,6 +612,26 @@ def _parser() -> argparse.ArgumentParser:
     key_options(view)
     device_options(view)
     view.set_defaults(run=command_view)
+
+    studio = commands.add_parser("studio", help="edit a scene beside its live image, in a web browser",
+                                 description="Serve a page with the scene's text, a control for every param "
+                                             "and key, its live image, presets, a timeline of keyframes and "
+                                             "final renders; saving writes them into the file. Prints the "
+                                             "page's address (with its token) on one line. Needs the "
+                                             "'studio' extra; see docs/studio.md (and its SSH-tunnel recipe).")
+    studio.add_argument("scene")
+    studio.add_argument("--host", default="127.0.0.1",
+                        help="the address to listen on (default 127.0.0.1: this machine only)")
+    studio.add_argument("--port", type=_option("port"), help="the port (default 8765, or the next free one; 0: any)")
+    studio.add_argument("--no-browser", action="store_true", help="do not open the page in a browser")
+    studio.add_argument("--live-size", type=_size, metavar="WxH",
+                        help="the live image's size (default: as large as the page shows it)")
+    studio.add_argument("--preview-scale", type=_option("preview_scale"), default=2, metavar="N",
+                        help="while anything moves, render at 1/N of the live size (default 2)")
+    studio.add_argument("--max-samples", type=_option("max_samples"), default=64, metavar="N",
+                        help="refine a still view up to this many samples per pixel (default 64)")
+    device_options(studio)
+    studio.set_defaults(run=command_studio)
 
     animate = commands.add_parser("animate", help="render the scene's camera path to frames",
                                   description="Render the frames of the scene's 'path' (first keyframe "

@@ -689,8 +689,9 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
     normal_method = f"{scene.render.normals}_normal"
     shading_functions = [f for f in lib.closure([normal_method] + shading_needs) if f.name not in placed]
 
-    params = ", ".join(f"[{p.index}] {_comment_text(p.name)} (default {p.default:g})"
-                       for p in scene.params) or "none"
+    # names only: a param's default is no part of the kernel (a new default in
+    # the file is no new source, so no rebuild)
+    params = ", ".join(f"[{p.index}] {_comment_text(p.name)}" for p in scene.params) or "none"
     scalar = "double" if target.double else "float"
     parts = [
         _HEADER.format(version=__version__, file=_comment_text(scene.file),

@@ -190,6 +190,9 @@ class _ToAst(Transformer_NonRecursive):
     def light_decl(self, meta, c):
         return ast.LightDecl(str(c[0]), _span(c[0]), c[1], _span(meta))
 
+    def preset_decl(self, meta, c):
+        return ast.PresetDecl(str(c[0]), _span(c[0]), c[1], _span(meta))
+
     def render_decl(self, meta, c):
         return ast.RenderDecl(c[0], _span(meta))
 
@@ -292,7 +295,10 @@ class _Stop(Exception):
 # text, group 5 a string and group 6 any other character (an error).
 _FAST_TOKEN = re.compile(r"(?:[ \t\r\f]+|#[^\n]*)*(?:([A-Za-z_][A-Za-z0-9_]*)|((?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)"
                          r"|(<=|>=|==|!=|[-+*/|&(){}\[\],:=.<>\n])|(\Z)|(\"[^\"\n]*\")|(.))", re.S)
-_DECL_WORDS = frozenset({"param", "let", "material", "scene", "camera", "light", "render", "path", "formula"})
+_DECL_WORDS = frozenset({"param", "let", "material", "scene", "camera", "light", "render", "path", "preset",
+                         "formula"})
+# Declarations of a name and a block: `material NAME { ... }`
+_NAMED_BLOCKS = {"material": ast.MaterialDecl, "light": ast.LightDecl, "preset": ast.PresetDecl}
 _COMPARISONS = frozenset({"<", "<=", ">", ">=", "==", "!="})
 _PRECEDENCE = {"|": 1, "&": 2, **{c: 2.5 for c in _COMPARISONS}, "+": 3, "-": 3, "*": 4, "/": 4}
 _STATEMENT_WORDS = frozenset({"init", "final", "if", "else"})     # keywords where a statement starts
@@ -442,11 +448,10 @@ class _FastParser:
             self.close(")")
             body, end = self.separated(self.statement)
             return ast.FormulaDecl(name, name_span, tuple(params), body, keyword.to(end))
-        if word == "material" or word == "light":
+        if word in _NAMED_BLOCKS:
             name, name_span = self.name()
             block = self.block()
-            node = ast.MaterialDecl if word == "material" else ast.LightDecl
-            return node(name, name_span, block, keyword.to(block.span))
+            return _NAMED_BLOCKS[word](name, name_span, block, keyword.to(block.span))
         if word == "path":
             keyframes, end = self.separated(self.keyframe)
             return ast.PathDecl(keyframes, keyword.to(end))

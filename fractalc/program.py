@@ -155,6 +155,12 @@ class Camera:
     eye_separation: float = 0.065    # distance between the eyes of a stereo camera
 
 
+def light_vector_key(kind: str) -> str:
+    """The key of a light block that `Light.vector` holds: the way a
+    directional light travels, any other light's position."""
+    return "direction" if kind == "directional" else "position"
+
+
 @dataclass(frozen=True)
 class Light:
     kind: str                   # directional | point | spot
@@ -169,6 +175,10 @@ class Light:
     radius: float = 0.25        # sphere: the light's radius
     width: float = 1.0          # rectangle: its size along `right` ...
     height: float = 1.0         # ... and along `up` (rectangle_edges)
+
+    def key_value(self, key: str):
+        """The value of the light block's key `key`, as checked."""
+        return self.vector if key == light_vector_key(self.kind) else getattr(self, key)
 
     def rectangle_edges(self) -> tuple[Vector3, Vector3]:
         """A rectangle light's edges, width along `right` (horizontal, across
@@ -295,6 +305,14 @@ class CameraPath:
 
 
 @dataclass(frozen=True)
+class Preset:
+    """A `preset` declaration: values of params saved under a name."""
+    name: str
+    params: tuple[tuple[str, float], ...]    # (name, value) in the order written
+    span: Span
+
+
+@dataclass(frozen=True)
 class CheckedScene:
     file: str
     source: str
@@ -306,3 +324,4 @@ class CheckedScene:
     render: RenderSettings = RenderSettings()
     param_checks: tuple[ParamCheck, ...] = ()
     path: CameraPath | None = None
+    presets: tuple[Preset, ...] = ()

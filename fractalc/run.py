@@ -259,6 +259,21 @@ def distances(program, device: Device, points: np.ndarray, params, lanes: int, d
     return result[:count].astype(np.float64)
 
 
+class ProgressReporter:
+    """A render's progress for a function: `report(done, total)` in
+    pixels after each tile (an exception it raises stops the render)."""
+
+    def __init__(self, report: Callable[[int, int], None], total_pixels: int):
+        self.report, self.total, self.done = report, total_pixels, 0
+
+    def update(self, pixels: int) -> None:
+        self.done += pixels
+        self.report(self.done, self.total)
+
+    def close(self) -> None:
+        pass
+
+
 def terminal_progress(total_pixels: int):
     """A progress bar on stderr for renders that take over a second."""
     from tqdm import tqdm

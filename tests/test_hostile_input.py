@@ -393,14 +393,14 @@ ALWAYS_REFUSED = ("inf", "nan", "٣")
 # options that take text (files, names, lists) rather than a number
 TEXT_OPTIONS = {"-o", "--output", "--json", "--csv", "--plot", "--mp4", "--output-dir", "--environment-map",
                 "--cluster", "--device", "--precision", "--compression", "--resolution", "--vary", "--aov",
-                "--lanes"}
+                "--lanes", "--preset", "--host"}
 # options whose value holds numbers in a form of its own: where a number goes
 NUMBER_IN = {"--set": "p={}", "--render": "ao={}", "--camera": "fov={}", "--bounds": "{},-1,-1,1,1,1",
-             "--frames": "{}"}
+             "--frames": "{}", "--live-size": "{}x12"}
 # each command's positional scene and required options ({tmp}: the test's folder)
 REQUIRED = {"render": ["-o", "{tmp}/out.png"], "compile": ["-o", "{tmp}/out.cl"], "check": ["--de"],
             "bench": [], "view": [], "animate": ["-o", "{tmp}/f_%03d.png"], "mesh": ["-o", "{tmp}/out.ply"],
-            "devices": []}
+            "devices": [], "studio": ["--no-browser"]}
 OPTIONS_SCENE = ("param p = 1 in [0, 2]\nscene sphere(p)\nrender { width: 16, height: 12 }\n"
                  "path { 0: { position: (0, -4, 1) }, 1: { position: (4, 0, 1) } }\n")
 
@@ -457,6 +457,9 @@ def test_every_numeric_option_answers_every_hostile_number_in_words(command, opt
     def accepted(*args, **kwargs):
         raise _Accepted
     monkeypatch.setattr(api, "loads", accepted)
+    if command == "studio":       # it serves before it loads
+        server = pytest.importorskip("fractalc.studio.server")
+        monkeypatch.setattr(server, "serve", accepted)
     scene = tmp_path / "scene.frac"
     scene.write_text(OPTIONS_SCENE)
     required = [part.format(tmp=tmp_path) for part in REQUIRED[command]]

@@ -216,7 +216,8 @@ def test_auto_fast_math_is_the_scenes_row_as_it_runs_on_the_device():
     from fractalc.sweep import scene_settings
     scene = fractalc.loads("scene sphere(1)")
     assert scene.checked.render.fast_math == "auto"
-    on_cpu = scene.device.lanes > 1
+    # auto: native_ functions on CPU lanes whose driver's are exact (PoCL's, not Intel's)
+    on_cpu = scene.device.lanes > 1 and scene.device.lane_choice.native_exact
     settings = scene_settings(scene)
     assert settings["fast_math"] == ("on" if on_cpu else "off")
     # the grid then holds the other value only: no row repeats the scene's kernel
