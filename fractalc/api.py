@@ -21,7 +21,7 @@ from .arguments import checked, require_type
 from .build import build
 from .devices import open_device
 from .denoise import denoise_image, require_denoiser
-from .check import FLOAT_MAX, RENDER_KEYS, check, check_param_values, check_value, in_float_range
+from .check import FLOAT_MAX, RENDER_KEYS, check, check_param_values, check_value, in_float_range, unknown_param
 from .emit import Target, emit, uniform_source
 from .errors import RenderError, SceneError, diagnostic
 from .lanes import CHOICES as LANE_CHOICES
@@ -159,10 +159,8 @@ class Scene:
         for name, value in values.items():
             require_type("a param's name", name, str, "a str")
             info = declared.get(name)
-            if info is None:
-                known = ", ".join(declared) or "none"
-                raise SceneError([diagnostic(self.checked.file, self.checked.source, _file_start(),
-                                             f"the scene has no param '{name}' (its params: {known})")])
+            if info is None:     # the caller's mistake, not the file's
+                raise ValueError(unknown_param(name, self.checked))
             try:
                 if isinstance(value, (str, bytes, bool)):
                     raise TypeError
@@ -311,6 +309,16 @@ class Scene:
         return run.distances(program, self.device, points, self._param_values(),
                              target.lanes, target.double)
 
+    def escape_time_set(self, points) -> np.ndarray:
+        """At (N, 3) points, the scene with each fractal that has a bailout
+        replaced by its escape-time set: -1 where the orbit stays within the
+        bailout for all the iterations (what the formula means), 1 where it
+        escapes; other shapes give their distances. `check --de` marches it
+        to measure the estimate against the set."""
+        target = self._target(self.checked.render)
+        program = build(emit(lower(self.checked, escape_time_sets=True), target), self.device)
+        return run.distances(program, self.device, points, self._param_values(), target.lanes, target.double)
+
     def mesh(self, resolution: int = 256, bounds=None, progress: bool = False):
         """The surface as a watertight triangle mesh (fractalc.mesh.Mesh:
         vertices, faces, normals; `.save(path)`), sampled on a grid of
@@ -402,11 +410,6 @@ class Scene:
             else:
                 metadata[f"render.{f.name}"] = vector(value) if isinstance(value, tuple) else str(value)
         return metadata
-
-
-def _file_start():
-    from .errors import Span
-    return Span(1, 1, 1, 2)
 
 
 def _check_lanes(lanes) -> None:

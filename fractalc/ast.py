@@ -5,10 +5,18 @@ places are different nodes, and hashing never walks a subtree.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Union
+from dataclasses import dataclass, fields
+from functools import cache
+from typing import Iterator, Union
 
 from .errors import Span
+
+
+class Node:
+    """What every AST node is: `children` and `walk` find the nodes inside
+    one by this base, whatever its kind."""
+    __slots__ = ()
+
 
 node = dataclass(frozen=True, eq=False, slots=True)
 
@@ -16,47 +24,57 @@ node = dataclass(frozen=True, eq=False, slots=True)
 # ---- expressions -----------------------------------------------------------
 
 @node
-class Number:
+class Number(Node):
     value: float
     span: Span
 
 
 @node
-class Name:
+class Name(Node):
     name: str
     span: Span
 
 
 @node
-class Vector:
+class Vector(Node):
     items: tuple["Expr", ...]
     span: Span
 
 
 @node
-class Unary:
+class Unary(Node):
     op: str            # "-"
     operand: "Expr"
     span: Span
 
 
 @node
-class Binary:
-    op: str            # + - * / | & and, in formulas, < <= > >= == !=
+class Binary(Node):
+    op: str            # + - * / and, in formulas, < <= > >= == != (| and & make a Chain)
     left: "Expr"
     right: "Expr"
     span: Span
 
 
 @node
-class Arg:
+class Chain(Node):
+    """`a | b | c ...` or `a & b & c ...`: operands joined by one operator
+    (both associative), one node however many: a chain of 300 is as deep as
+    `union(...)` of 300."""
+    op: str            # | or &
+    operands: tuple["Expr", ...]
+    span: Span
+
+
+@node
+class Arg(Node):
     name: str | None   # None for a positional argument
     value: "Expr"
     span: Span
 
 
 @node
-class Call:
+class Call(Node):
     name: str
     name_span: Span
     args: tuple[Arg, ...]
@@ -64,7 +82,7 @@ class Call:
 
 
 @node
-class Method:
+class Method(Node):
     """`receiver.name(args)`: a transform of a shape."""
     receiver: "Expr"
     name: str
@@ -74,7 +92,7 @@ class Method:
 
 
 @node
-class Field:
+class Field(Node):
     """`receiver.x`: components of a vector (x, y, z, w, or several: xyz)."""
     receiver: "Expr"
     name: str
@@ -82,11 +100,11 @@ class Field:
     span: Span
 
 
-Expr = Union[Number, Name, Vector, Unary, Binary, Call, Method, Field]
+Expr = Union[Number, Name, Vector, Unary, Binary, Chain, Call, Method, Field]
 
 
 @node
-class String:
+class String(Node):
     """A string literal: a file name, only ever a block entry's value."""
     value: str         # the text between the quotes, as written (no escapes)
     span: Span         # quotes included
@@ -95,7 +113,7 @@ class String:
 # ---- blocks and declarations -----------------------------------------------
 
 @node
-class Entry:
+class Entry(Node):
     key: str
     key_span: Span
     value: Union[Expr, "Block", String]
@@ -103,13 +121,13 @@ class Entry:
 
 
 @node
-class Block:
+class Block(Node):
     entries: tuple[Entry, ...]
     span: Span
 
 
 @node
-class ParamDecl:
+class ParamDecl(Node):
     name: str
     name_span: Span
     default: Expr
@@ -118,7 +136,7 @@ class ParamDecl:
 
 
 @node
-class LetDecl:
+class LetDecl(Node):
     name: str
     name_span: Span
     value: Expr
@@ -126,7 +144,7 @@ class LetDecl:
 
 
 @node
-class MaterialDecl:
+class MaterialDecl(Node):
     name: str
     name_span: Span
     block: Block
@@ -134,19 +152,19 @@ class MaterialDecl:
 
 
 @node
-class SceneDecl:
+class SceneDecl(Node):
     shape: Expr
     span: Span
 
 
 @node
-class CameraDecl:
+class CameraDecl(Node):
     block: Block
     span: Span
 
 
 @node
-class LightDecl:
+class LightDecl(Node):
     kind: str
     kind_span: Span
     block: Block
@@ -154,13 +172,13 @@ class LightDecl:
 
 
 @node
-class RenderDecl:
+class RenderDecl(Node):
     block: Block
     span: Span
 
 
 @node
-class Keyframe:
+class Keyframe(Node):
     """`TIME: { ... }` in a path: camera keys and param values at that time."""
     time: float
     time_span: Span
@@ -169,7 +187,7 @@ class Keyframe:
 
 
 @node
-class PathDecl:
+class PathDecl(Node):
     keyframes: tuple[Keyframe, ...]
     span: Span
 
@@ -186,7 +204,7 @@ class PresetDecl:
 # ---- formulas ----------------------------------------------------------------
 
 @node
-class Assign:
+class Assign(Node):
     """`name = value` in a formula: `phase` says when it runs: "init" once
     before the iterations, "step" in each, "final" once after them."""
     name: str
@@ -197,7 +215,7 @@ class Assign:
 
 
 @node
-class If:
+class If(Node):
     """`if condition { ... } else { ... }` among a formula's steps."""
     condition: Expr
     then: tuple["Statement", ...]
@@ -209,7 +227,7 @@ Statement = Union[Assign, If]
 
 
 @node
-class FormulaDecl:
+class FormulaDecl(Node):
     name: str
     name_span: Span
     params: tuple[ParamDecl, ...]
@@ -222,7 +240,45 @@ Decl = Union[ParamDecl, LetDecl, MaterialDecl, SceneDecl, CameraDecl, LightDecl,
 
 
 @node
-class Program:
+class Program(Node):
     decls: tuple[Decl, ...]
     file: str
     source: str
+
+
+# ---- walking -------------------------------------------------------------------
+
+# Field types that never hold a node (annotations are strings here)
+_PLAIN = frozenset({"str", "str | None", "float", "Span"})
+
+
+@cache
+def _field_names(kind: type) -> tuple[str, ...]:
+    """The fields of a node kind that may hold nodes."""
+    return tuple(f.name for f in fields(kind) if f.type not in _PLAIN)
+
+
+def children(parent: Node) -> tuple[Node, ...]:
+    """The nodes directly inside `parent`, in source order: its fields that
+    are nodes or tuples of nodes (arguments, items, statements, a param's
+    bounds). Every pass that walks the AST walks it through this, so no
+    pass can miss a kind of node."""
+    found: list[Node] = []
+    for name in _field_names(type(parent)):
+        value = getattr(parent, name)
+        if isinstance(value, Node):
+            found.append(value)
+        elif isinstance(value, tuple):
+            found.extend(x for x in value if isinstance(x, Node))
+    return tuple(found)
+
+
+def walk(root: Node) -> Iterator[Node]:
+    """`root` and every node inside it, each before the nodes inside it and
+    in source order (the order evaluation meets them), on an explicit
+    stack: any depth costs no Python recursion."""
+    stack = [root]
+    while stack:
+        here = stack.pop()
+        yield here
+        stack.extend(reversed(children(here)))

@@ -1,4 +1,5 @@
-"""`fractalc bench`: the dissertation seed's benchmark (seed 000, 5.2).
+"""`fractalc bench`: the benchmark of the dissertation plan "Real-time Rendering of 3D
+'Fractal-like' Geometry" (Solomon Baarda; its section 5.2, the performance benchmark scene).
 
 The camera orbits the scene's target about its up axis for a fixed number
 of frames at a fixed resolution; we report frame-time statistics, compile

@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 from enum import Enum
 
 from . import ast, formula_code, ir, pathtrace
-from .errors import Diagnostic, SceneError, Span, diagnostic
+from .errors import Diagnostic, SceneError, Severity, Span, diagnostic
 from .program import (DEFAULT_MATERIAL, PROJECTIONS, STEREO_LAYOUTS, Camera, CameraPath, CheckedScene, Coloring,
                       Combination, Environment, Fog, Fractal, Glow, Keyframe, Light, Material, ParamCheck, ParamInfo,
                       Preset, Primitive, RenderSettings, Shape, Slice, Transformed, WithMaterial, cosine_palette,
@@ -86,7 +86,11 @@ class _Checker:
         self.colors: dict[tuple, str] = {}
         self.param_checks: list[ParamCheck] = []
         self.shape_sizes: dict[int, tuple[Shape, int]] = {}
-        self.formulas: dict[str, tuple[formula_code.Formula, Signature] | None] = dict(library_formulas() if with_library else ())
+        # the library's formulas, and those a scene can call by name: the library's and the file's own
+        self.library_formulas: dict[str, tuple[formula_code.Formula, Signature]] = \
+            dict(library_formulas() if with_library else ())
+        self.formulas: dict[str, tuple[formula_code.Formula, Signature] | None] = dict(self.library_formulas)
+        self.notes: list[Diagnostic] = []
 
     # ---- diagnostics -------------------------------------------------------
 
@@ -96,6 +100,9 @@ class _Checker:
     def fail(self, span: Span, message: str):
         self.error(span, message)
         raise _Failed
+
+    def note(self, span: Span, message: str) -> None:
+        self.notes.append(diagnostic(self.program.file, self.program.source, span, message, Severity.NOTE))
 
     # ---- declarations ------------------------------------------------------
 
@@ -156,7 +163,8 @@ class _Checker:
             raise SceneError(self.errors)
         scene = CheckedScene(self.program.file, self.program.source, tuple(self.params.values()),
                              self.materials, shape, camera, tuple(l for l in lights if l), render,
-                             tuple(self.param_checks), path, presets)
+                             tuple(self.param_checks), path, presets,
+                             tuple(sorted(self.notes, key=lambda d: (d.line, d.column))))
         check_param_values(scene, [p.default for p in scene.params])
         return scene
 
@@ -222,18 +230,32 @@ class _Checker:
             defaults.append(value.data)
         try:
             formula = formula_code.split(decl, self.program.file)
-            formula_code.orbit((formula_code.Use(formula, tuple(defaults)),), _PROBE_POINT, ir.const(2.0))
+            formula_code.orbit((formula_code.Use(formula, tuple(defaults)),), formula_code.POINT, ir.const(2.0))
         except formula_code.Mistake as mistake:
             self.error(mistake.span, mistake.message)
             return
         self.formulas[decl.name] = (formula, Signature("formula", decl.name, tuple(parameters)))
+        hidden = self.library_formulas.get(decl.name)
+        if hidden is not None:
+            where = f"{os.path.basename(os.path.dirname(hidden[0].file))}/{os.path.basename(hidden[0].file)}"
+            self.note(decl.name_span, f"'{decl.name}' hides the library formula of that name ({where}:"
+                                      f"{hidden[0].span.line}); the library's is still "
+                                      f"'{LIBRARY}.{decl.name}(...)'")
 
-    def formula_use(self, e: ast.Call) -> Value:
-        known = self.formulas[e.name]
+    def formula_use(self, e: ast.Call | ast.Method, known) -> Value:
+        """A formula with its arguments; `known` is its declaration (None: one that had a mistake)."""
         if known is None:
             raise _Failed              # its declaration had a mistake, already reported
         formula, signature = known
         return Value(FORMULA, (formula_code.Use(formula, self.bound_args(e, signature, e.args)),))
+
+    def library_formula(self, e: ast.Method) -> Value:
+        """`library.NAME(...)`: the library's formula NAME, even where the file's hides it."""
+        known = self.library_formulas.get(e.name)
+        if known is None:
+            self.fail(e.name_span, f"the library has no formula '{e.name}'"
+                                   f"{self.did_you_mean(e.name, self.library_formulas)}")
+        return self.formula_use(e, known)
 
     def hybrid(self, e: ast.Call) -> Value:
         sequence = []
@@ -250,6 +272,18 @@ class _Checker:
             self.require_hybrid_steps(sequence, arg.span)
         if not sequence:
             self.fail(e.span, "'hybrid' needs at least one formula")
+        sizes = {}                     # 3 or 4 -> the first formula whose z has that many components
+        for use in sequence:
+            try:
+                size = formula_code.z_size(use, formula_code.POINT)
+            except formula_code.Mistake:
+                continue               # the formula's own mistake, reported where it is used
+            if size in (3, 4):
+                sizes.setdefault(size, use.formula.name)
+        if len(sizes) > 1:
+            self.fail(e.span, f"a hybrid's formulas must all work on 3-vectors or all on 4-vectors: "
+                              f"'{sizes[4]}' makes z a 4-vector in its 'init', '{sizes[3]}' works on the "
+                              f"point's 3")
         return Value(FORMULA, tuple(sequence))
 
     def repeated(self, e: ast.Binary, formula: Value, count: Value) -> Value:
@@ -293,17 +327,23 @@ class _Checker:
             if p.name == "julia" and value.type == "vec4":
                 p = replace(p, type="vec4")
             values[p.name] = self.convert(arg.value.span, value, p, "fractal")
+        # the estimate's kind from |z|'s growth at the params' defaults and range ends
+        params = tuple(self.params.values())
+        param_values = tuple(tuple(p.default if value is None else value for p, value in zip(params, chosen))
+                             for chosen in ([None] * len(params), [p.low for p in params], [p.high for p in params]))
         try:
-            formula_code.orbit(formula.data, _PROBE_POINT, ir.const(2.0), values["bailout"], values["julia"],
-                               where=e.span)
+            growth = formula_code.growth(formula.data, values["julia"], param_values)
+            formula_code.orbit(formula.data, formula_code.POINT, ir.const(2.0), values["bailout"], values["julia"],
+                               where=e.span, estimate=growth.estimate)
         except formula_code.Mistake as mistake:
             inside = next((u.formula for u in formula.data if u.formula.file != self.program.file), None)
             if inside is None or mistake.span == e.span:
                 self.fail(mistake.span, mistake.message)
             self.fail(e.span, f"{mistake.message} (in the library's '{inside.name}', "
                               f"{inside.file}:{mistake.span.line})")
+        reason = None if formula.data[-1].formula.sets_distance else growth.reason()
         return self.shape(Fractal(formula.data, values["iterations"], values["bailout"], values["julia"],
-                                  values["bound"], values["step"], e.span))
+                                  values["bound"], values["step"], e.span, growth, reason))
 
     def constant_number(self, expr: ast.Expr, what: str) -> float | None:
         value = self.evaluate(expr)
@@ -355,22 +395,8 @@ class _Checker:
     def let_uses(self, name: str) -> list[str]:
         """The lets named in a let's expression, in the order evaluation
         meets them."""
-        found, stack = [], [self.lets[name].value]
-        while stack:
-            e = stack.pop()
-            if isinstance(e, ast.Name):
-                if e.name in self.lets and e.name not in self.params:
-                    found.append(e.name)
-            elif isinstance(e, ast.Vector):
-                stack.extend(reversed(e.items))
-            elif isinstance(e, ast.Unary):
-                stack.append(e.operand)
-            elif isinstance(e, ast.Binary):
-                stack.extend((e.right, e.left))
-            elif isinstance(e, (ast.Call, ast.Method)):
-                receiver = (e.receiver,) if isinstance(e, ast.Method) else ()
-                stack.extend(reversed(receiver + tuple(a.value for a in e.args)))
-        return found
+        return [e.name for e in ast.walk(self.lets[name].value)
+                if isinstance(e, ast.Name) and e.name in self.lets and e.name not in self.params]
 
     # ---- expressions -------------------------------------------------------
 
@@ -407,6 +433,8 @@ class _Checker:
             return self.arithmetic(e, "neg", [operand])
         if isinstance(e, ast.Binary):
             return self.binary(e)
+        if isinstance(e, ast.Chain):
+            return self.chain(e)
         if isinstance(e, ast.Call):
             return self.call(e)
         if isinstance(e, ast.Method):
@@ -439,8 +467,8 @@ class _Checker:
         thousands of unknown names stays linear."""
         if len(self.errors) >= SUGGESTED_ERRORS:
             return ""
-        close = difflib.get_close_matches(name, itertools.chain(*known), n=1)
-        return f" (did you mean '{close[0]}'?)" if close else ""
+        close = closest_name(name, itertools.chain(*known))
+        return f" (did you mean '{close}'?)" if close else ""
 
     def value_of(self, e: ast.Expr) -> Value:
         """Evaluate an expression that must be a value (not a bare word)."""
@@ -459,19 +487,32 @@ class _Checker:
             self.fail(e.right.span if left.type == SHAPE else e.span,
                       "this is a formula: make it a shape with 'fractal(formula(...), iterations: N)'"
                       if left.type == SHAPE else "a formula's repeat count goes after it: 'formula * count'")
-        if e.op not in "+-*/|&":
+        if e.op not in "+-*/":
             self.fail(e.span, f"'{e.op}' compares numbers in a formula; a scene has no comparisons")
         if left.type == SHAPE and right.type == SHAPE:
-            if e.op == "*" or e.op == "/" or e.op == "+":
+            if e.op != "-":
                 self.fail(e.span, f"'{e.op}' does not combine shapes: use '|' (union), '&' (intersect) or '-' (subtract)")
-            kind = {"|": "union", "&": "intersect", "-": "subtract"}[e.op]
-            return self.shape(Combination(kind, (left.data, right.data), ir.const(0.0), e.span))
+            return self.shape(Combination("subtract", (left.data, right.data), ir.const(0.0), e.span))
         if SHAPE in (left.type, right.type):
             other = right if left.type == SHAPE else left
             self.fail(e.span, f"'{e.op}' needs two shapes or two numbers/vectors, not a shape and {_TYPE_WORDS[other.type]}")
-        if e.op in "|&":
-            self.fail(e.span, f"'{e.op}' combines shapes; these are {_TYPE_WORDS[left.type]} and {_TYPE_WORDS[right.type]}")
-        return self.arithmetic(e, {"+": "+", "-": "-", "*": "*", "/": "/"}[e.op], [left, right])
+        return self.arithmetic(e, e.op, [left, right])
+
+    def chain(self, e: ast.Chain) -> Value:
+        """`a | b | ...` (a union) or `a & b & ...` (an intersection) of shapes:
+        one combination of them all, as union(...) and intersect(...) are."""
+        shapes = []
+        for operand in e.operands:
+            value = self.value_of(operand)
+            if value.type == "error":
+                raise _Failed
+            if value.type != SHAPE:
+                self.fail(operand.span, "this is a formula: make it a shape with 'fractal(formula(...), iterations: N)'"
+                          if value.type == FORMULA else
+                          f"'{e.op}' combines shapes ({'union' if e.op == '|' else 'intersection'}), "
+                          f"this is {_TYPE_WORDS[value.type]}")
+            shapes.append(value.data)
+        return self.shape(Combination("union" if e.op == "|" else "intersect", tuple(shapes), ir.const(0.0), e.span))
 
     def arithmetic(self, e, op: str, operands: list[Value], mode: str = "map") -> Value:
         """Component-wise arithmetic on numbers and vectors; numbers broadcast."""
@@ -618,7 +659,7 @@ class _Checker:
     def call(self, e: ast.Call) -> Value:
         name = e.name
         if name in self.formulas:
-            return self.formula_use(e)
+            return self.formula_use(e, self.formulas[name])
         if name == "fractal":
             return self.fractal(e)
         if name == "hybrid":
@@ -696,6 +737,9 @@ class _Checker:
         return Value(NUM, items[0]) if len(items) == 1 else Value(vec_type(len(items)), ir.Vec(items))
 
     def method(self, e: ast.Method) -> Value:
+        if isinstance(e.receiver, ast.Name) and e.receiver.name == LIBRARY and not any(
+                LIBRARY in names for names in (self.params, self.lets, self.material_decls)):
+            return self.library_formula(e)
         receiver = self.value_of(e.receiver)
         if receiver.type == "error":
             raise _Failed
@@ -853,15 +897,29 @@ class _Checker:
         if keys is None:
             self.error(decl.kind_span, f"unknown light kind '{decl.kind}' (known: {', '.join(LIGHT_KEYS)})")
             return None
+        errors_before = len(self.errors)
         found = self.entries(decl.block, keys, "light")
         vector_key = light_vector_key(decl.kind)
-        needed = (vector_key, "direction") if decl.kind in ("spot", "rectangle") else (vector_key,)
-        if any(key not in found for key in needed):
-            for key in needed:
-                if not any(e.key == key for e in decl.block.entries):
-                    self.error(decl.span, f"a {decl.kind} light needs '{key}'")
+        given = {e.key: e for e in decl.block.entries}
+        aimed = "target" in keys         # a spot or rectangle light: `direction` or `target`, as a camera
+        if aimed and "direction" in given and "target" in given:
+            second = max(given["direction"], given["target"], key=lambda e: (e.span.line, e.span.column))
+            self.error(second.key_span, f"a {decl.kind} light takes 'direction' or 'target', not both")
+        needed = (vector_key, "direction") if aimed else (vector_key,)
+        for key in needed:
+            if key not in given and not (key == "direction" and "target" in given):
+                self.error(decl.span, f"a {decl.kind} light needs '{key}'"
+                                      + (" (or 'target', the point it faces)" if key == "direction" else ""))
+        if len(self.errors) > errors_before:
             return None
         vector = found.pop(vector_key)
+        if aimed and "target" in found:
+            target = found.pop("target")
+            found["direction"] = tuple(t - p for t, p in zip(target, vector))
+            if not any(found["direction"]):
+                self.error(given["target"].value.span, f"the {decl.kind} light's target is its position: "
+                                                        f"it faces nowhere")
+                return None
         if decl.kind in ("sphere", "rectangle"):    # the direct renderer's stand-in for their soft shadows
             found.setdefault("shadows", "soft")
         return Light(decl.kind, vector, **found)
@@ -1004,11 +1062,13 @@ _LIGHT_COMMON = (_P("color", "vec3", None, ">=0"), _P("intensity", "num", None, 
                  _P("shadows", "word:none|hard|soft"), _P("softness", "num", None, ">0"))
 LIGHT_KEYS = {"directional": _keys(_P("direction", "vec3", None, "nonzero"), *_LIGHT_COMMON),
               "point": _keys(_P("position", "vec3"), *_LIGHT_COMMON),
-              "spot": _keys(_P("position", "vec3"), _P("direction", "vec3", None, "nonzero"), *_LIGHT_COMMON,
-                            _P("angle", "num", None, ">0", "<180"), _P("falloff", "num", None, ">=0", "<=180")),
+              "spot": _keys(_P("position", "vec3"), _P("direction", "vec3", None, "nonzero"), _P("target", "vec3"),
+                            *_LIGHT_COMMON, _P("angle", "num", None, ">0", "<180"),
+                            _P("falloff", "num", None, ">=0", "<=180")),
               "sphere": _keys(_P("position", "vec3"), _P("radius", "num", None, ">0"), *_LIGHT_COMMON),
               "rectangle": _keys(_P("position", "vec3"), _P("direction", "vec3", None, "nonzero"),
-                                 _P("width", "num", None, ">0"), _P("height", "num", None, ">0"), *_LIGHT_COMMON)}
+                                 _P("target", "vec3"), _P("width", "num", None, ">0"), _P("height", "num", None, ">0"),
+                                 *_LIGHT_COMMON)}
 BLOCK_KEYS = {
     "block:glow": (_keys(_P("color", "vec3", None, ">=0"), _P("strength", "num", None, ">=0"),
                          _P("radius", "num", None, ">0")), Glow()),
@@ -1106,9 +1166,9 @@ FORMULA_FORMS = {
         _P("julia", "vec3", 0.0), _P("bound", "num", 0.0, ">0"), _P("step", "num", 1.0, ">0", "<=1"))),
     "hybrid": Signature("fractal", "hybrid", ()),
 }
-# The point formulas are tried at when checked
-_PROBE_POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
-
+# `library.NAME(...)` names the library's formula NAME (unless the file
+# declares a value called `library`)
+LIBRARY = "library"
 
 @lru_cache(maxsize=1)
 def library_formulas() -> tuple[tuple[str, tuple], ...]:
@@ -1124,6 +1184,25 @@ def library_formulas() -> tuple[tuple[str, tuple], ...]:
             raise SceneError(checker.errors)
         found.extend(checker.formulas.items())
     return tuple(found)
+
+
+def closest_name(name: str, known) -> str | None:
+    """The name among `known` closest to a misspelt `name`, if one is close."""
+    close = difflib.get_close_matches(name, known, n=1)
+    return close[0] if close else None
+
+
+def unknown_param(name: str, scene: CheckedScene) -> str | None:
+    """What is wrong with setting the param `name` of `scene`: None if the
+    scene declares it, else that it does not, with the closest name or the
+    names it has."""
+    known = [p.name for p in scene.params]
+    if name in known:
+        return None
+    close = closest_name(name, known)
+    hint = f"; did you mean '{close}'?" if close else f" (its params: {', '.join(known)})" if known else \
+        " (it declares none)"
+    return f"the scene has no param '{name}'{hint}"
 
 
 def check(program: ast.Program) -> CheckedScene:

@@ -135,19 +135,37 @@ def _configure(scene, keys: tuple[dict, dict]) -> None:
         raise UsageError(f"--camera: {error}") from None
 
 
+def _require_params(items: list[str] | None, checked) -> dict[str, float]:
+    """--set's values, each naming a param the scene declares."""
+    from .check import unknown_param
+    params = _parse_set(items)
+    for item in items or ():
+        mistake = unknown_param(item.partition("=")[0].strip(), checked)
+        if mistake:
+            raise UsageError(f"--set {item}: {mistake}")
+    return params
+
+
+def _print_notes(checked) -> None:
+    for note in checked.notes:
+        print(note, file=sys.stderr)
+
+
 def _load(args):
     from .api import loads
     text = _require_file(args.scene)
-    params = _parse_set(getattr(args, "set", None))
+    _parse_set(getattr(args, "set", None))          # its syntax before any work
     keys = _keys_given(args) if hasattr(args, "render") else None
-    scene = loads(text, params=params, precision=getattr(args, "precision", None),
-                  device=getattr(args, "device", None), path=args.scene)
+    scene = loads(text, precision=getattr(args, "precision", None), device=getattr(args, "device", None),
+                  path=args.scene)
+    params = _require_params(getattr(args, "set", None), scene.checked)
     if getattr(args, "preset", None):
         try:
             scene.apply_preset(args.preset)
         except ValueError as error:
             raise UsageError(f"--preset {args.preset}: {error}") from None
-        scene.set_params(params)      # --set wins over the preset
+    scene.set_params(params)      # --set wins over the preset
+    _print_notes(scene.checked)
     if keys:
         _configure(scene, keys)
     return scene
@@ -229,19 +247,68 @@ def command_compile(args) -> int:
     return 0
 
 
+def _count(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def _checked_summary(scene) -> tuple[str, list]:
+    """`check`'s line for a scene that checks (its parts, formulas, params,
+    lights and the optional features its kernel will have) and its notes of
+    the estimate each fractal gets, in source order."""
+    from .emit import features
+    from .errors import Severity, diagnostic
+    from .lower import lower
+    from .program import Combination, Fractal, Primitive, Transformed, WithMaterial, fold_shape
+    checked = scene.checked
+    kinds: dict[str, int] = {}
+    formulas: list[str] = []
+    notes: list = []        # which estimate each fractal's kind chose, and why
+
+    def parts(shape, _):
+        kind = "fractal" if isinstance(shape, Fractal) or (
+            isinstance(shape, Primitive) and shape.signature.kind == "fractal") else \
+            "shape" if isinstance(shape, Primitive) else \
+            "combination" if isinstance(shape, Combination) else "transform"
+        kinds[kind] = kinds.get(kind, 0) + 1
+        names = [u.formula.name for u in shape.sequence] if isinstance(shape, Fractal) else \
+            [shape.signature.name] if kind == "fractal" else []
+        formulas.extend(name for name in names if name not in formulas)
+        if isinstance(shape, Fractal) and shape.estimate_reason:
+            notes.append(diagnostic(checked.file, checked.source, shape.span,
+                                    f"the fractal gets {shape.estimate_reason}", Severity.NOTE))
+        if isinstance(shape, Combination):
+            return tuple((part, None) for part in shape.shapes)
+        return ((shape.shape, None),) if isinstance(shape, (Transformed, WithMaterial)) else ()
+
+    fold_shape(checked.shape, None, parts, lambda *_: None)
+    shown = ", ".join(_count(kinds[k], k) for k in ("shape", "fractal", "combination", "transform") if k in kinds)
+    on = [name.lower().replace("_", " ") for name, enabled in features(lower(checked)).items() if enabled]
+    line = "; ".join((
+        f"{scene.checked.file}: ok: {_count(sum(kinds.values()), 'part')} ({shown})",
+        f"formulas: {', '.join(formulas)}" if formulas else "no formulas",
+        f"{_count(len(checked.params), 'param')}" + (f" ({', '.join(p.name for p in checked.params)})"
+                                                      if checked.params else ""),
+        _count(len(checked.lights), "light") if checked.lights else "the headlight",
+        f"kernel features: {', '.join(on) or 'none'}"))
+    return line, sorted(notes, key=lambda d: (d.line, d.column))
+
+
 def command_check(args) -> int:
     if not args.de:
-        from .check import check
-        from .parse import parse
-        check(parse(_require_file(args.scene), args.scene))
+        line, notes = _checked_summary(_load(args))
+        for note in notes:
+            print(note, file=sys.stderr)
+        print(line)
         return 0
-    from .overstep import measure
+    from .overstep import Against, has_escape_time_set, measure
     scene = _load(args)
-    try:
-        result = measure(scene, rays=args.rays, seed=args.seed, surface=args.surface)
-    except ValueError as error:
-        raise UsageError(f"--de: {error}") from None
-    print(f"{args.scene}: {result.report()}")
+    # against the estimate's own surface, then (fractals with a bailout) the escape-time set
+    for against in (Against.ESTIMATE, Against.ESCAPE_TIME_SET)[:1 + has_escape_time_set(scene)]:
+        try:
+            result = measure(scene, rays=args.rays, seed=args.seed, surface=args.surface, against=against)
+        except ValueError as error:
+            raise UsageError(f"--de: {error}") from None
+        print(f"{args.scene}: {result.report()}", flush=True)
     return 0
 
 
@@ -334,13 +401,18 @@ def command_bench(args) -> int:
 
 
 def command_view(args) -> int:
-    _require_file(args.scene)
+    text = _require_file(args.scene)
     keys = _keys_given(args)
+    if args.set:        # each a param of the file's, before a window opens
+        from .check import check
+        from .parse import parse
+        _require_params(args.set, check(parse(text, args.scene)))
     from .view import Viewer, measure, show
     viewer = Viewer(args.scene, args.width, args.height, params=_parse_set(args.set),
                     precision=args.precision, device=args.device, preview_scale=args.preview_scale,
                     max_samples=args.max_samples, output_dir=args.output_dir)
     _configure(viewer.scene, keys)     # the file's own keys come back when it is edited and reloaded
+    _print_notes(viewer.scene.checked)
     viewer.look_from(viewer.scene.checked.camera)
     if args.benchmark:
         fps = measure(viewer, args.benchmark)
@@ -560,7 +632,7 @@ def _parser() -> argparse.ArgumentParser:
     check_.set_defaults(run=command_check)
 
     bench_ = commands.add_parser("bench", help="measure frame times along a camera orbit",
-                                 description="The benchmark of seed 000: render --frames frames along an "
+                                 description="The dissertation plan's benchmark (its section 5.2): render --frames frames along an "
                                              "orbit of the camera about its target; report frame-time "
                                              "statistics, compile time and the machine. With --sweep: "
                                              "render time against error over the quality knobs "
@@ -770,7 +842,8 @@ def main(argv: list[str] | None = None) -> int:
         print(error, file=sys.stderr)
         return 2
     except UsageError as error:
-        parser.print_usage(sys.stderr)
+        # one line: argparse's own syntax errors (an unknown option, a missing
+        # -o) print its usage block; a mistake in a value or a file does not
         print(f"fractalc: error: {error}", file=sys.stderr)
         return 2
     except RenderError as error:

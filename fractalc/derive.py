@@ -144,6 +144,37 @@ def gradient_length(z, rows) -> ir.Expr:
     return ir.op("sqrt", total)
 
 
+def spectral_norm(rows) -> ir.Expr:
+    """The largest singular value of the Jacobian `rows` (one row of three
+    tangents per component of z): the most z moves when the point moves by
+    one. sqrt of the largest eigenvalue of the symmetric A = J^T J, in
+    closed form (Smith, "Eigenvalues of a symmetric 3 x 3 matrix", 1961);
+    where A is a multiple of the identity (a similarity), that multiple."""
+    def entry(i: int, j: int) -> ir.Expr:
+        total = None
+        for row in rows:
+            term = ir.mul(row[i], row[j])
+            total = term if total is None else ir.add(total, term)
+        return total
+
+    a = [[entry(i, j) for j in range(3)] for i in range(3)]
+    off = ir.add(ir.add(ir.mul(a[0][1], a[0][1]), ir.mul(a[0][2], a[0][2])), ir.mul(a[1][2], a[1][2]))
+    q = ir.div(ir.add(ir.add(a[0][0], a[1][1]), a[2][2]), ir.const(3.0))
+    shifted = [ir.sub(a[i][i], q) for i in range(3)]
+    spread = ir.add(ir.add(ir.add(ir.mul(shifted[0], shifted[0]), ir.mul(shifted[1], shifted[1])),
+                           ir.mul(shifted[2], shifted[2])), ir.mul(ir.const(2.0), off))
+    p = ir.op("sqrt", ir.div(spread, ir.const(6.0)))
+    scale = ir.op("max", p, ir.const(1e-30))      # p = 0: the select below takes q
+    b = [[ir.div(shifted[i] if i == j else a[i][j], scale) for j in range(3)] for i in range(3)]
+    det = ir.sub(ir.add(ir.mul(b[0][0], ir.sub(ir.mul(b[1][1], b[2][2]), ir.mul(b[1][2], b[2][1]))),
+                        ir.mul(b[0][2], ir.sub(ir.mul(b[1][0], b[2][1]), ir.mul(b[1][1], b[2][0])))),
+                 ir.mul(b[0][1], ir.sub(ir.mul(b[1][0], b[2][2]), ir.mul(b[1][2], b[2][0]))))
+    half = ir.op("clamp", ir.mul(det, ir.const(0.5)), ir.const(-1.0), ir.const(1.0))
+    largest = ir.add(q, ir.mul(ir.mul(ir.const(2.0), p), ir.op("cos", ir.div(ir.op("acos", half), ir.const(3.0)))))
+    largest = ir.op("select", ir.op("le", p, ir.mul(q, ir.const(1e-12))), q, largest)
+    return ir.op("sqrt", ir.op("max", largest, ir.const(0.0)))
+
+
 def finite_distance(distance: ir.Expr) -> ir.Expr:
     """`distance` within +-1e30: every estimate's guard (LANGUAGE.md: an
     estimate is finite everywhere). OpenCL's clamp is fmin(fmax(...)),

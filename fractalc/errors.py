@@ -5,6 +5,7 @@ correct by construction or a `RenderError` (runtime) / compiler bug.
 """
 from __future__ import annotations
 
+import enum
 import re
 import unicodedata
 from dataclasses import dataclass
@@ -33,6 +34,11 @@ class Span:
         return Span(self.line, self.column, other.end_line, other.end_column)
 
 
+class Severity(str, enum.Enum):
+    ERROR = "error"      # the scene is refused
+    NOTE = "note"        # the scene is fine; something about it a user should know
+
+
 @dataclass(frozen=True)
 class Diagnostic:
     file: str
@@ -41,9 +47,10 @@ class Diagnostic:
     message: str
     source_line: str = ""
     width: int = 1
+    severity: Severity = Severity.ERROR
 
     def __str__(self) -> str:
-        text = f"{visible(self.file)}:{self.line}:{self.column}: error: {visible(self.message)}"
+        text = f"{visible(self.file)}:{self.line}:{self.column}: {self.severity.value}: {visible(self.message)}"
         if self.source_line:
             text += "\n" + quote(self.source_line, self.column, self.width)
         return text
@@ -96,11 +103,12 @@ def source_lines(source: str) -> tuple[str, ...]:
     return tuple(LINE_BREAK.split(source))
 
 
-def diagnostic(file: str, source: str, span: Span, message: str) -> Diagnostic:
+def diagnostic(file: str, source: str, span: Span, message: str,
+               severity: Severity = Severity.ERROR) -> Diagnostic:
     lines = source_lines(source)
     line_text = lines[span.line - 1] if 0 < span.line <= len(lines) else ""
     width = span.end_column - span.column if span.end_line == span.line else 1
-    return Diagnostic(file, span.line, span.column, message, line_text, max(1, width))
+    return Diagnostic(file, span.line, span.column, message, line_text, max(1, width), severity)
 
 
 class SceneError(Exception):

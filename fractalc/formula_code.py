@@ -14,9 +14,12 @@ differentiated in forward mode (fractalc/derive.py, part VII).
 """
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass, replace
 from typing import Callable
+
+import numpy as np
 
 from . import ast, derive, formulas, ir
 from .errors import Span
@@ -29,6 +32,11 @@ OVERFLOW_LENGTH = 1e18
 MAX_DERIVATIVE = 1e30
 DEFAULT_BAILOUT = 4.0
 ESTIMATES = ("escape_time_estimate", "linear_estimate")
+# What `final` lines may read of the compiler's derivative (docs/formulas.md):
+# dr, how fast |z| moves with the point (the running derivative; |grad |z||
+# on the Jacobian path), and jacobian_norm, the most z moves when the point
+# moves by one (the Jacobian's spectral norm; |dr| for similarities).
+DERIVED = ("dr", "jacobian_norm")
 VECTOR_TYPES = ("vec2", "vec3", "vec4")
 _WORDS = {"num": "a number", "vec2": "a 2-vector", "vec3": "a 3-vector", "vec4": "a 4-vector",
           "mask": "a comparison"}
@@ -46,7 +54,6 @@ class Value:
     type: str                                   # num | vec2..vec4 | mask
     items: tuple[ir.Expr, ...]
     form: tuple[ir.Expr, ir.Expr] | None = INDEPENDENT
-    degree: float = 0.0                         # its growth with z: 1 for z, 2 for z^2, ...
     underivable: Span | None = None             # an operation on the point without a derivative rule
 
     @property
@@ -62,8 +69,8 @@ def number(x: ir.Expr) -> Value:
     return Value("num", (x,))
 
 
-def vector(items, form=INDEPENDENT, degree=0.0) -> Value:
-    return Value(f"vec{len(items)}", tuple(items), form, degree)
+def vector(items, form=INDEPENDENT) -> Value:
+    return Value(f"vec{len(items)}", tuple(items), form)
 
 
 def _scaled_form(form, s: ir.Expr):
@@ -74,11 +81,11 @@ def _summed_form(f, g):
     return None if f is None or g is None else (ir.add(f[0], g[0]), ir.add(f[1], g[1]))
 
 
-def _dependent_scalar(degree: float, *operands: Value) -> Value:
+def _dependent_scalar(*operands: Value) -> Value:
     """The shared fields of a value computed from `operands` by an
     operation that is not a similarity."""
     independent = all(o.independent for o in operands)
-    return Value("num", (), INDEPENDENT if independent else None, 0.0 if independent else degree,
+    return Value("num", (), INDEPENDENT if independent else None,
                  next((o.underivable for o in operands if o.underivable), None))
 
 
@@ -107,10 +114,24 @@ class Formula:
         return tuple(names)
 
     @property
+    def derived(self) -> tuple[str, ...]:
+        """The compiler's derivatives (DERIVED) the final lines read, those
+        the formula does not set itself (its own `init dr = 1`)."""
+        own = _names(self.init + self.step) | {s.name for s in self.final if isinstance(s, ast.Assign)}
+        read = {e.name for e in _expressions(self.final) if isinstance(e, ast.Name)}
+        return tuple(name for name in DERIVED if name in read and name not in own)
+
+    @property
+    def sets_distance(self) -> bool:
+        """Whether the final lines give the estimate (their own, or one of
+        ESTIMATES chosen by name), not the compiler's by its kind."""
+        return any(s.name == "distance" for s in self.final)
+
+    @property
     def own_estimate(self) -> bool:
         """Whether `final distance = ...` gives the estimate without asking
-        for the compiler's."""
-        return any(s.name == "distance" for s in self.final) and not _calls(self.final, ESTIMATES)
+        for the compiler's estimates or derivatives."""
+        return self.sets_distance and not _calls(self.final, ESTIMATES) and not self.derived
 
 
 def split(decl: ast.FormulaDecl, file: str = "<string>") -> Formula:
@@ -137,42 +158,13 @@ _RESERVED = {"stop": "step", "trap": "step", "distance": "final"}
 
 
 def _nested(statement) -> list:
-    found, stack = [], [statement]
-    while stack:
-        s = stack.pop()
-        if isinstance(s, ast.If):
-            for inner in (*s.then, *s.otherwise):
-                found.append(inner)
-                stack.append(inner)
-    return found
+    """The statements inside `statement` (the sides of an `if`, and theirs)."""
+    return [n for n in ast.walk(statement) if n is not statement and isinstance(n, (ast.Assign, ast.If))]
 
 
 def _expressions(statements) -> list:
     """Every expression node of `statements`, ifs' included."""
-    stack = [s for s in statements]
-    found = []
-    while stack:
-        s = stack.pop()
-        if isinstance(s, ast.If):
-            stack.extend((*s.then, *s.otherwise))
-            found.append(s.condition)
-        else:
-            found.append(s.value)
-    out = []
-    while found:
-        e = found.pop()
-        out.append(e)
-        if isinstance(e, ast.Call):
-            found.extend(a.value for a in e.args)
-        elif isinstance(e, ast.Binary):
-            found.extend((e.left, e.right))
-        elif isinstance(e, ast.Unary):
-            found.append(e.operand)
-        elif isinstance(e, ast.Vector):
-            found.extend(e.items)
-        elif isinstance(e, (ast.Field, ast.Method)):
-            found.append(e.receiver)
-    return out
+    return [n for s in statements for n in ast.walk(s) if not isinstance(n, (ast.Assign, ast.If, ast.Arg))]
 
 
 def _names(statements) -> set:
@@ -242,6 +234,9 @@ class Interpreter:
                                       f"{one_sided[e.name].line}: set it on both, or before the 'if'")
             if e.name in FUNCTIONS or e.name in ESTIMATES:
                 raise Mistake(e.span, f"'{e.name}' is a function: call it, e.g. '{e.name}(...)'")
+            if e.name in DERIVED:
+                raise Mistake(e.span, f"'{e.name}' is the compiler's derivative at the orbit's end: only 'final' "
+                                      f"lines read it")
             raise Mistake(e.span, f"unknown name '{e.name}' in formula")
         if isinstance(e, ast.Vector):
             parts = [self.expr(x, env) for x in e.items]
@@ -263,6 +258,8 @@ class Interpreter:
                 return _within_float(e, self.binary(e, left, right))
             except (ValueError, ZeroDivisionError, OverflowError):
                 raise Mistake(e.span, f"'{e.op}' is undefined for these values") from None
+        if isinstance(e, ast.Chain):
+            return self.chain(e, [self.expr(x, env) for x in e.operands])
         if isinstance(e, ast.Field):
             return self.field(e, self.expr(e.receiver, env))
         if isinstance(e, ast.Call):
@@ -292,17 +289,22 @@ class Interpreter:
                                        f"(components: {', '.join(_COMPONENTS[:len(v.items)])})")
         items = tuple(v.items[_COMPONENTS.index(ch)] for ch in e.name)
         if len(items) == 1:
-            return replace(_dependent_scalar(v.degree, v), items=items)
+            return replace(_dependent_scalar(v), items=items)
         # a projection does not lengthen: the bound a dr + b still holds
         return replace(v, type=f"vec{len(items)}", items=items)
 
+    @staticmethod
+    def chain(e: ast.Chain, values: list[Value]) -> Value:
+        """Comparisons joined by '&' (and) or '|' (or), as a balanced tree."""
+        for operand, v in zip(e.operands, values):
+            if v.type != "mask":
+                raise Mistake(operand.span, f"'{e.op}' joins comparisons ('{'and' if e.op == '&' else 'or'}'), "
+                                            f"this is {_word(v)}")
+        joined = ir.pairwise([v.items[0] for v in values], lambda a, b: ir.op("and" if e.op == "&" else "or", a, b))
+        return Value("mask", (joined,), INDEPENDENT if all(v.independent for v in values) else None)
+
     def binary(self, e: ast.Binary, a: Value, b: Value) -> Value:
         op = e.op
-        if op in ("&", "|"):
-            if a.type != "mask" or b.type != "mask":
-                raise Mistake(e.span, f"'{op}' joins comparisons ('and' / 'or'); these are {_word(a)} and {_word(b)}")
-            return Value("mask", (ir.op("and" if op == "&" else "or", a.items[0], b.items[0]),),
-                         INDEPENDENT if a.independent and b.independent else None)
         if "mask" in (a.type, b.type):
             raise Mistake(e.span, f"'{op}' needs numbers or vectors, not a comparison")
         if op in ("<", "<=", ">", ">=", "==", "!="):
@@ -332,19 +334,18 @@ class Interpreter:
                 form = other.form if scalar.independent else None
             else:
                 form = _summed_form(a.form, b.form)
-            return Value(kind, items, form, max(a.degree, b.degree), underivable)
+            return Value(kind, items, form, underivable)
         if op == "/" and any(ir.is_const(x) and x.value == 0.0 for x in b.items):
             raise Mistake(e.span, "division by zero")
         if op == "*" or op == "/":
-            degree = a.degree + b.degree if op == "*" else a.degree - b.degree
             if a.independent and b.independent:
-                return Value(kind, items, INDEPENDENT, 0.0, underivable)
+                return Value(kind, items, INDEPENDENT, underivable)
             scalar, other = (a, b) if a.type == "num" else (b, a) if b.type == "num" else (None, None)
             form = None
             if kind != "num" and scalar is not None and scalar.independent and (op == "*" or scalar is b):
                 size_ = ir.op("abs", scalar.items[0])
                 form = _scaled_form(other.form, size_ if op == "*" else ir.div(ONE, size_))
-            return Value(kind, items, form, degree, underivable)
+            return Value(kind, items, form, underivable)
         raise Mistake(e.span, f"unknown operator '{op}'")
 
 
@@ -358,7 +359,6 @@ def _joined(parts: list[Value]) -> Value:
     elif dependent:
         form = None
     return Value(f"vec{len(items)}" if len(items) > 1 else "num", items, form,
-                 max((v.degree for v in parts), default=0.0),
                  next((v.underivable for v in parts if v.underivable), None))
 
 
@@ -378,7 +378,7 @@ def _chosen(condition: Value, a: list[Value], b: list[Value]) -> list[Value]:
         i += n + 2 * forms
         if forms and all(ir.is_const(f) and f.value == 0.0 for f in form):
             form = INDEPENDENT
-        values.append(Value(x.type, items, form, max(x.degree, y.degree), x.underivable or y.underivable))
+        values.append(Value(x.type, items, form, x.underivable or y.underivable))
     return values
 
 
@@ -420,7 +420,7 @@ class Function:
             raise Mistake(e.span, f"'{e.name}' is undefined for these values") from None
 
 
-def _block(make: Callable, degree: Callable | None = None):
+def _block(make: Callable):
     """A building block of formulas.py as a function: its result keeps z's
     form times the block's factor where the block has one and its other
     arguments do not depend on the point."""
@@ -430,8 +430,7 @@ def _block(make: Callable, degree: Callable | None = None):
         form = _scaled_form(z.form, block.factor) if block.factor is not None and others_independent else None
         if z.independent and others_independent:
             form = INDEPENDENT
-        grown = degree(rest) if degree else z.degree
-        return Value(f"vec{len(block.z)}", tuple(block.z), form, grown,
+        return Value(f"vec{len(block.z)}", tuple(block.z), form,
                      next((v.underivable for v in (z, *rest) if v.underivable), None))
     return compute
 
@@ -443,12 +442,7 @@ def _box_fold(span: Span, z: Value, limit: Value) -> Value:
     return _block(formulas.box_fold)(span, z, limit)
 
 
-def _power_degree(rest):
-    power = rest[0].items[0]
-    return power.value if ir.is_const(power) else math.inf
-
-
-def _map(name: str, degree: Callable[[list[float]], float], derivable: bool = True):
+def _map(name: str, derivable: bool = True):
     """A function of numbers applied per component (numbers broadcast)."""
     def compute(span: Span, *values: Value):
         size = max(len(v.items) for v in values)
@@ -464,7 +458,7 @@ def _map(name: str, degree: Callable[[list[float]], float], derivable: bool = Tr
         if name == "abs" and size > 1 and values[0].form is not None:
             form = values[0].form              # the octant fold: lengths kept
         kind = "num" if size == 1 else f"vec{size}"
-        return Value(kind, items, form, 0.0 if independent else degree([v.degree for v in values]), underivable)
+        return Value(kind, items, form, underivable)
     return compute
 
 
@@ -477,14 +471,14 @@ def _select(span: Span, condition: Value, a: Value, b: Value) -> Value:
     if forms and all(ir.is_const(x) and x.value == 0.0 for x in form):
         form = INDEPENDENT
     return Value(a.type, tuple(ir.op("select", condition.items[0], x, y) for x, y in zip(a.items, b.items)), form,
-                 max(a.degree, b.degree), a.underivable or b.underivable)
+                 a.underivable or b.underivable)
 
 
 def _vector_fn(function: Callable, result: str):
     def compute(span: Span, *values: Value):
         items = function(*(v.items for v in values))
         items = items if isinstance(items, tuple) else (items,)
-        return replace(_dependent_scalar(max(v.degree for v in values) * (2 if function is ir.dot else 1), *values),
+        return replace(_dependent_scalar(*values),
                        type=result if result != "same" else values[0].type, items=items)
     return compute
 
@@ -507,14 +501,7 @@ def _quaternion_multiply(span: Span, a: Value, b: Value) -> Value:
     elif a.independent or b.independent:          # times a constant quaternion: a scale and a rotation
         fixed, moving = (a, b) if a.independent else (b, a)
         form = _scaled_form(moving.form, ir.length(fixed.items))
-    return Value("vec4", items, form, a.degree + b.degree, a.underivable or b.underivable)
-
-
-def _growth(name):
-    """How a function of numbers grows with z: like its arguments (piecewise-linear ones), half as fast
-    (sqrt) or faster than any power (the transcendental ones)."""
-    return lambda d: max(d) if name in ("abs", "min", "max", "clamp", "mix") else \
-        (max(d) / 2 if name == "sqrt" else math.inf)
+    return Value("vec4", items, form, a.underivable or b.underivable)
 
 
 FUNCTIONS: dict[str, Function] = {
@@ -531,22 +518,20 @@ FUNCTIONS: dict[str, Function] = {
     "scale": Function(("v", "n", "v?"), _block(formulas.scale), "scale(z, factor, centre)"),
     "stretch": Function(("v", "v"), _block(formulas.stretch), "stretch(z, factors)"),
     "translate": Function(("v", "v"), _block(formulas.translate), "translate(z, offset)"),
-    "triplex_power": Function(("3", "n"), _block(formulas.triplex_power, degree=_power_degree),
-                              "triplex_power(z, power)"),
-    "quaternion_square": Function(("4",), _block(formulas.quaternion_square, degree=lambda rest: 2.0),
-                                  "quaternion_square(q)"),
+    "triplex_power": Function(("3", "n"), _block(formulas.triplex_power), "triplex_power(z, power)"),
+    "quaternion_square": Function(("4",), _block(formulas.quaternion_square), "quaternion_square(q)"),
     "quaternion_multiply": Function(("4", "4"), _quaternion_multiply, "quaternion_multiply(a, b)"),
     # math
-    **{name: Function(("any",), _map(name, _growth(name)), f"{name}(x)")
+    **{name: Function(("any",), _map(name), f"{name}(x)")
        for name in ("sin", "cos", "tan", "asin", "acos", "atan", "sqrt", "rsqrt", "abs", "exp", "log", "radians",
                     "degrees")},
-    **{name: Function(("any",), _map(name, lambda d: 0.0, derivable=False), f"{name}(x)") for name in ("floor", "round")},
-    "atan2": Function(("any", "any"), _map("atan2", _growth("atan2")), "atan2(y, x)"),
-    "min": Function(("any", "any"), _map("min", _growth("min")), "min(a, b)"),
-    "max": Function(("any", "any"), _map("max", _growth("max")), "max(a, b)"),
-    "pow": Function(("any", "any"), _map("pow", lambda d: math.inf), "pow(x, y)"),
-    "clamp": Function(("any", "any", "any"), _map("clamp", _growth("clamp")), "clamp(x, low, high)"),
-    "mix": Function(("any", "any", "any"), _map("mix", _growth("mix")), "mix(a, b, t)"),
+    **{name: Function(("any",), _map(name, derivable=False), f"{name}(x)") for name in ("floor", "round")},
+    "atan2": Function(("any", "any"), _map("atan2"), "atan2(y, x)"),
+    "min": Function(("any", "any"), _map("min"), "min(a, b)"),
+    "max": Function(("any", "any"), _map("max"), "max(a, b)"),
+    "pow": Function(("any", "any"), _map("pow"), "pow(x, y)"),
+    "clamp": Function(("any", "any", "any"), _map("clamp"), "clamp(x, low, high)"),
+    "mix": Function(("any", "any", "any"), _map("mix"), "mix(a, b, t)"),
     "select": Function(("m", "any", "any"), _select, "select(condition, if_true, if_false)"),
     "length": Function(("v",), _vector_fn(ir.length, "num"), "length(v)"),
     "dot": Function(("v", "v"), _vector_fn(ir.dot, "num"), "dot(a, b)"),
@@ -571,6 +556,9 @@ class Orbit:
     distance: ir.Expr
     trap: tuple[ir.Expr, ...]       # origin, |x|, |y|, |z|, the steps taken (empty unless asked for)
     scalar: bool                    # the estimate from a scalar running derivative (else the Jacobian or own)
+    # -1 where the orbit stays within the bailout for all its iterations (the
+    # escape-time set: what the formula means), 1 where it escapes; None without a bailout
+    inside: ir.Expr | None = None
 
 
 def _arg_value(arg) -> Value:
@@ -585,20 +573,105 @@ def _readonly(use: Use) -> frozenset:
     return frozenset(("c",) + use.formula.params)
 
 
+# ---- the estimate's kind: |z|'s growth, measured --------------------------------
+
+class Estimate(enum.Enum):
+    LINEAR = "linear"               # (r - offset) / |dr|: folds, IFS, boxes
+    ESCAPE_TIME = "escape-time"     # 0.5 r ln r / |dr|: z grows faster than linearly (powers)
+
+
+# A step's growth is the exponent k of |F(z)| ~ |z|^k far out, from |z| at
+# these radii (c near the origin), the median over seeded directions; above
+# ESCAPE_GROWTH the escape-time estimate (z^2 + c grows as 2, a fold or an
+# IFS step as 1, Kaliset's abs(z) / |z|^2 + c as 0).
+GROWTH_RADII = (1e2, 1e4)
+ESCAPE_GROWTH = 1.5
+_GROWTH_DIRECTIONS = 32
+_NEAR = (0.1, -0.2, 0.3)            # c while measuring (Mandelbrot mode): a point near the origin
+# The sample point as IR, where formulas are checked and measured
+POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
+
+
+@dataclass(frozen=True)
+class Growth:
+    """How fast a fractal's |z| grows per step far out, as measured: the
+    largest exponent among its formulas, whose it is, and so its estimate."""
+    exponent: float
+    formula: str
+
+    @property
+    def estimate(self) -> Estimate:
+        return Estimate.ESCAPE_TIME if self.exponent > ESCAPE_GROWTH else Estimate.LINEAR
+
+    def reason(self) -> str:
+        """Which estimate, and why, in words."""
+        grows = "faster than any power" if math.isinf(self.exponent) else f"as |z|^{self.exponent:.2f}"
+        low, high = (f"{r:g}" for r in GROWTH_RADII)
+        escape = self.estimate is Estimate.ESCAPE_TIME
+        return (f"{'the escape-time estimate 0.5 r ln r / dr' if escape else 'the linear estimate r / dr'}: a step "
+                f"of '{self.formula}' grows |z| {grows} far out (measured from |z| = {low} to {high}), "
+                f"{'' if escape else 'no '}faster than |z|^{ESCAPE_GROWTH:g}")
+
+
+def growth(sequence: tuple[Use, ...], julia: ir.Vec | None = None,
+           param_values: tuple[tuple[float, ...], ...] = ((),)) -> Growth:
+    """Measure how each formula of `sequence` grows |z| far out (for each
+    set of the scene's param values given: the largest); the estimate's
+    kind follows from it, whatever the steps' spelling."""
+    directions = np.random.default_rng(0).normal(size=(_GROWTH_DIRECTIONS, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    points = np.concatenate([GROWTH_RADII[0] * directions, GROWTH_RADII[1] * directions])
+    found = []
+    for use in _unique(sequence):
+        far = _far_step_length(use, julia)
+        exponent = 0.0
+        for values in param_values:
+            near_length, far_length = np.split(ir.evaluate_at((far,), points, values)[0], 2)
+            with np.errstate(all="ignore"):
+                k = np.log(far_length / near_length) / math.log(GROWTH_RADII[1] / GROWTH_RADII[0])
+            k = np.where(np.isfinite(far_length), np.nan_to_num(k, nan=0.0), math.inf)
+            exponent = max(exponent, float(np.median(k)))
+        found.append(Growth(exponent, use.formula.name))
+    return max(found, key=lambda g: g.exponent)
+
+
+def _far_step_length(use: Use, julia: ir.Vec | None) -> ir.Expr:
+    """|z| after one step of the formula from z = the point (taken far
+    out), with c near the origin (or the Julia constant)."""
+    near = vector(tuple(ir.const(x) for x in _NEAR))
+    start = Interpreter().run(use.formula.init, {"c": near, **_environment(use), "z": near}, _readonly(use))
+    extra = (ZERO,) * (len(start["z"].items) - 3)
+    fits = julia is not None and len(julia.items) == len(start["z"].items)     # else orbit's mistake
+    env = {"c": vector(julia.items) if fits else vector((*near.items, *extra)),
+           **_environment(use), **{name: start[name] for name in use.formula.carried if name != "z"},
+           "z": vector((*POINT, *extra), (ONE, ZERO))}
+    return ir.length(Interpreter().run(use.formula.step, env, _readonly(use))["z"].items)
+
+
+def z_size(use: Use, point: tuple[ir.Expr, ...]) -> int:
+    """The components of the formula's z: 4 where its own `init` makes it a
+    4-vector (`init z = (z, w)`), else the point's 3."""
+    z = vector(point, (ONE, ZERO))
+    out = Interpreter().run(use.formula.init, {"c": _constant(None, z, point), **_environment(use), "z": z},
+                            _readonly(use))
+    return len(out["z"].items)
+
+
 def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.Expr,
           bailout: ir.Expr | None = None, julia: ir.Vec | None = None, trap: bool = False,
-          jacobian: bool | None = None, where: Span | None = None) -> Orbit:
+          jacobian: bool | None = None, where: Span | None = None, estimate: Estimate | None = None) -> Orbit:
     """The estimate of the fractal of a formula, or a hybrid of several
     applied in turn (`count` steps each), `iterations` steps in all; a ray
     stops once |z| > bailout or a step would take z beyond OVERFLOW_LENGTH.
-    Without a bailout, escape-time formulas take DEFAULT_BAILOUT and the
-    others none. Raises Mistake (at `where`, the use, for the use's own
-    mistakes)."""
+    `estimate` is its kind (None: measured now, `growth`, for formulas
+    whose arguments are constants); without a bailout, escape-time
+    formulas take DEFAULT_BAILOUT and the others none. Raises Mistake (at
+    `where`, the use, for the use's own mistakes)."""
     interpreter = Interpreter()
     uses = _unique(sequence)
 
     # init: each formula's carried values, in order; z starts as the point
-    z = vector(point, (ONE, ZERO), 1.0)
+    z = vector(point, (ONE, ZERO))
     carried: list[dict[str, Value]] = []
     for use in uses:
         env = {"c": _constant(julia, z, point), **_environment(use), "z": z}
@@ -643,7 +716,9 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
                                                  "'final distance = ...'")
     conformal = all(v.form is not None for v in z_forms) and not own
     use_scalar = conformal if jacobian is None else (not jacobian and conformal)
-    escape = any(v.degree > 1.5 for v in z_forms)
+    if estimate is None:
+        estimate = growth(sequence, julia).estimate
+    escape = estimate is Estimate.ESCAPE_TIME
     if bailout is None and escape:
         bailout = ir.const(DEFAULT_BAILOUT)
 
@@ -679,7 +754,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
 
     def round_(state):
         fields = unpack(state)
-        z_now = Value(z.type, fields["z"], (ONE, ZERO), 1.0)
+        z_now = Value(z.type, fields["z"], (ONE, ZERO))
         stopped = fields["stopped"][0] if stoppable else None
         for j, (k, use) in enumerate(steps):
             # with one step per iteration the loop's condition stops the ray
@@ -706,7 +781,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
                 stopped = ir.op("or", stopped, ir.op("and", going, ir.op("not", ok)))
             if "stop" in out:               # `stop = condition`: these rays iterate no more
                 stopped = ir.op("or", stopped, ir.op("and", ok, out["stop"].items[0]))
-            z_now = Value(z.type, fields["z"], (ONE, ZERO), 1.0)
+            z_now = Value(z.type, fields["z"], (ONE, ZERO))
         if stoppable:
             fields["stopped"] = (stopped,)
         if period > 1:
@@ -732,16 +807,27 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
     dr = fields["dr"][0] if use_scalar else None
     traps = (*fields["trap"], *fields["steps"]) if trap else ()
 
-    def derived(name: str, args: list[Value], span: Span) -> Value:
+    last = uses[-1]
+    final_z, final_values, rows = tuple(z_final), finals[-1], None
+    if not use_scalar and not own:
+        # z's Jacobian: the final lines read z and the carried values from the
+        # loop that carries the tangents too, so the iterations run once
+        items = [x for v in final_values.values() for x in v.items]
+        rebuilt, all_rows = _jacobian((*final_z, *items), point, _last_z(last.formula).span)
+        final_z, rows, values = rebuilt[:dims], all_rows[:dims], iter(rebuilt[dims:])
+        final_values = {name: replace(v, items=tuple(next(values) for _ in v.items))
+                        for name, v in final_values.items()}
+
+    def estimate(name: str, args: list[Value], span: Span) -> Value:
         offset = args[0].items[0] if args else ZERO
         if args and (len(args) > 1 or args[0].type != "num"):
             raise Mistake(span, f"'{name}' takes at most one number (the linear estimate's offset)")
-        return number(_estimate(name == "escape_time_estimate", z_final, dr, point, use_scalar, offset, span))
+        return number(_estimate(name == "escape_time_estimate", final_z, rows, dr, offset))
 
-    last = uses[-1]
     if last.formula.final:
-        env = {"c": c, **_environment(last), **finals[-1], "z": Value(z.type, tuple(z_final), None, 1.0)}
-        out = Interpreter(derived).run(last.formula.final, env, _readonly(last))
+        env = {"c": c, **_environment(last), **final_values, "z": Value(z.type, final_z, None),
+               **{name: number(_derivative(name, final_z, rows, dr)) for name in last.formula.derived}}
+        out = Interpreter(estimate).run(last.formula.final, env, _readonly(last) | set(last.formula.derived))
         distance = out.get("distance")
         if distance is None:
             raise Mistake(last.formula.final[-1].span, "'final' lines must set 'distance' (the estimate)")
@@ -750,8 +836,9 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
             raise Mistake(assigned.value.span, f"'distance' must be a number, this is {_word(distance)}")
         de = derive.finite_distance(distance.items[0])    # the formula's own: guarded as a derived one is
     else:
-        de = _estimate(escape, z_final, dr, point, use_scalar, ZERO, _last_z(uses[-1].formula).span)
-    return Orbit(de, traps, use_scalar)
+        de = _estimate(escape, final_z, rows, dr, ZERO)
+    inside = None if bailout is None else ir.op("select", _inside(z_final, bailout), ir.const(-1.0), ONE)
+    return Orbit(de, traps, use_scalar, inside)
 
 
 def _within_float(e: ast.Expr, value: Value) -> Value:
@@ -765,16 +852,31 @@ def _within_float(e: ast.Expr, value: Value) -> Value:
     return value
 
 
-def _estimate(escape: bool, z, dr, point, scalar: bool, offset: ir.Expr, where: Span) -> ir.Expr:
-    if not scalar:
-        try:
-            rebuilt, rows = derive.jacobian(z, point)
-        except (ValueError, ZeroDivisionError, OverflowError):
-            # a rule meeting constants outside its domain: 1 / 0 in the derivative of x / 0, of sqrt(0), ...
-            raise Mistake(where, "the derivative of this step is undefined for its constants (a division by "
-                                 "zero, or sqrt, log, asin or acos at the end of their domain)") from None
-        return derive.escape_time_estimate(rebuilt, rows) if escape else \
-            derive.linear_estimate(rebuilt, rows, offset)
+def _jacobian(values, point, where: Span):
+    """derive.jacobian, its failure a Mistake at `where`."""
+    try:
+        return derive.jacobian(values, point)
+    except (ValueError, ZeroDivisionError, OverflowError):
+        # a rule meeting constants outside its domain: 1 / 0 in the derivative of x / 0, of sqrt(0), ...
+        raise Mistake(where, "the derivative of this step is undefined for its constants (a division by "
+                             "zero, or sqrt, log, asin or acos at the end of their domain)") from None
+
+
+def _derivative(name: str, z, rows, dr) -> ir.Expr:
+    """A DERIVED value at the orbit's end: from the scalar running
+    derivative `dr`, or from z's Jacobian `rows` (None on the scalar path)."""
+    if rows is None:
+        return ir.op("abs", dr)        # a similarity's Jacobian is |dr| times a rotation
+    if name == "dr":
+        return derive.finite_estimate(derive.gradient_length(z, rows), ir.length(z))
+    return derive.spectral_norm(rows)
+
+
+def _estimate(escape: bool, z, rows, dr, offset: ir.Expr) -> ir.Expr:
+    """The escape-time or linear estimate, from z's Jacobian `rows` (the
+    Jacobian path) or the scalar running derivative `dr` (rows None)."""
+    if rows is not None:
+        return derive.escape_time_estimate(z, rows) if escape else derive.linear_estimate(z, rows, offset)
     r = ir.length(z)
     if escape:
         estimate = derive.finite_estimate(ir.mul(ir.mul(ir.const(0.5), ir.op("log", r)), r), ir.op("abs", dr))
@@ -796,13 +898,15 @@ def _constant(julia, z: Value, point) -> Value:
     if julia is not None:
         return vector(julia.items)
     extra = (ZERO,) * (len(z.items) - 3)
-    return vector((*point, *extra), (ZERO, ONE), 1.0)
+    return vector((*point, *extra), (ZERO, ONE))
 
 
 def _unique(sequence) -> list:
+    """The uses of a hybrid, each formula with its arguments once (a file's
+    formula and the library's of the same name are two)."""
     seen, out = set(), []
     for use in sequence:
-        key = (use.formula.name, use.args)
+        key = (use.formula, use.args)
         if key not in seen:
             seen.add(key)
             out.append(use)
@@ -810,7 +914,7 @@ def _unique(sequence) -> list:
 
 
 def _count(sequence, use) -> int:
-    return sum(u.count for u in sequence if (u.formula.name, u.args) == (use.formula.name, use.args))
+    return sum(u.count for u in sequence if (u.formula, u.args) == (use.formula, use.args))
 
 
 def _assignment(formula: Formula, name: str):
@@ -831,7 +935,7 @@ def _step_values(interpreter, uses, carried, dependent, z: Value, c: Value) -> l
     """Each formula's values after one step from symbolic state, for
     their forms (which values depend on the point)."""
     results = []
-    probe_z = Value(z.type, tuple(ir.Var(f"z.{i}", ir.REAL) for i in range(len(z.items))), (ONE, ZERO), 1.0)
+    probe_z = Value(z.type, tuple(ir.Var(f"z.{i}", ir.REAL) for i in range(len(z.items))), (ONE, ZERO))
     for k, use in enumerate(uses):
         env = {"c": c, **_environment(use), "z": probe_z}
         for name, v in carried[k].items():

@@ -25,14 +25,18 @@ Vector = tuple[ir.Expr, ...]
 class Orbit:
     distance: ir.Expr
     trap: tuple[ir.Expr, ...]      # origin, |x|, |y|, |z|, the steps taken (empty: not asked for)
+    inside: ir.Expr | None         # -1 in the escape-time set, 1 out of it (formula_code.Orbit); None: no bailout
 
 
 def _formula(name: str, point: Vector, args: tuple, iterations: ir.Expr, bailout: ir.Expr | None,
              trap: bool) -> Orbit:
     """The library formula NAME_formula as this fractal."""
     formula = dict(library_formulas())[f"{name}_formula"][0]
-    found = formula_code.orbit((formula_code.Use(formula, args),), point, iterations, bailout, trap=trap)
-    return Orbit(found.distance, found.trap)
+    # each gives its own estimate and its bailout (the box and the solids none): the kind, which only
+    # chooses a default bailout here, is linear
+    found = formula_code.orbit((formula_code.Use(formula, args),), point, iterations, bailout, trap=trap,
+                               estimate=formula_code.Estimate.LINEAR)
+    return Orbit(found.distance, found.trap, found.inside)
 
 
 MANDELBULB = "power: num = 8 1..32, iterations: int = 12 1..1000, bailout: num = 2 >0"

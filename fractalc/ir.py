@@ -326,6 +326,14 @@ def components(e: Expr | Vec) -> tuple[Expr, ...]:
     return tuple(Comp(e, i) for i in range(3))
 
 
+def pairwise(items: list, pair) -> object:
+    """Reduce `items` with `pair` as a balanced tree of neighbours (depth
+    log2 n, not n), each pair in its original order."""
+    while len(items) > 1:
+        items = [pair(*items[i:i + 2]) if i + 1 < len(items) else items[i] for i in range(0, len(items), 2)]
+    return items[0]
+
+
 def vec(*items: Expr) -> Vec:
     return Vec(tuple(items))
 

@@ -156,14 +156,6 @@ def _operands(s: Combination) -> tuple[Shape, ...]:
     return tuple(found)
 
 
-def _pairwise(items: list, pair) -> object:
-    """Reduce `items` with `pair` as a balanced tree of neighbours (depth
-    log2 n, not n), each pair in its original order."""
-    while len(items) > 1:
-        items = [pair(*items[i:i + 2]) if i + 1 < len(items) else items[i] for i in range(0, len(items), 2)]
-    return items[0]
-
-
 def _nearer(a, b):
     """Union of (distance, surface) pairs: on a tie the first part's surface."""
     (da, sa), (db, sb) = a, b
@@ -176,9 +168,10 @@ def _farther(a, b):
 
 
 class _Lowerer:
-    def __init__(self, scene: CheckedScene):
+    def __init__(self, scene: CheckedScene, escape_time_sets: bool = False):
         self.materials = scene.materials
         self.library = library()
+        self.escape_time_sets = escape_time_sets
 
     def surface_of(self, name: str) -> Surface:
         """The surface of material `name`; its index counts the scene's
@@ -216,7 +209,7 @@ class _Lowerer:
     def primitive(self, s: Primitive, point: Point) -> ir.Expr:
         if s.signature.kind != "fractal":
             return ir.call(s.signature.function, (ir.Vec(point),) + s.args)
-        distance = orbit(s.signature.name, point, s.args).distance
+        distance = self.estimate_or_set(orbit(s.signature.name, point, s.args))
         # A fractal: far from its bounding sphere, the sphere's distance is
         # a safe step and the fractal is not evaluated (Hart et al. 1989).
         radius = ir.call(f"{s.signature.name}_bound_radius", s.args)
@@ -229,9 +222,13 @@ class _Lowerer:
             return surface
         return _trap_colored(surface, coloring, orbit(s.signature.name, point, s.args, trap=True).trap, point)
 
-    @staticmethod
-    def fractal(s: Fractal, point: Point) -> ir.Expr:
-        distance = ir.mul(formula_code.orbit(s.sequence, point, s.iterations, s.bailout, s.julia).distance, s.step)
+    def estimate_or_set(self, found) -> ir.Expr:
+        """A fractal's estimate, or (escape_time_sets) its escape-time set's -1 / 1 where it has a bailout."""
+        return found.inside if self.escape_time_sets and found.inside is not None else found.distance
+
+    def fractal(self, s: Fractal, point: Point) -> ir.Expr:
+        distance = ir.mul(self.estimate_or_set(formula_code.orbit(s.sequence, point, s.iterations, s.bailout,
+                                                                  s.julia, estimate=s.growth.estimate)), s.step)
         if s.bound is None:
             return distance
         bound = ir.call("sd_sphere", (ir.Vec(point), s.bound))
@@ -243,12 +240,13 @@ class _Lowerer:
         if coloring is None:
             return surface
         return _trap_colored(surface, coloring, formula_code.orbit(s.sequence, point, s.iterations, s.bailout,
-                                                                   s.julia, trap=True).trap, point)
+                                                                   s.julia, trap=True,
+                                                                   estimate=s.growth.estimate).trap, point)
 
     @staticmethod
     def combination(s: Combination, lowered: list):
         if _plain(s):   # min / max: a balanced tree, the same result as folding left
-            return _pairwise(lowered, _nearer if s.kind == "union" else _farther)
+            return ir.pairwise(lowered, _nearer if s.kind == "union" else _farther)
         # smooth ones fold left to right (LANGUAGE.md)
         distance, surface = lowered[0]
         for d, other in lowered[1:]:
@@ -422,16 +420,19 @@ def _dot(x, y, z) -> ir.Expr:
     return ir.add(ir.add(ir.mul(x, x), ir.mul(y, y)), ir.mul(z, z))
 
 
-def lower(scene: CheckedScene) -> SceneIR:
-    """Lower the scene's shape to its distance and surface expressions."""
-    lowerer = _Lowerer(scene)
+def lower(scene: CheckedScene, escape_time_sets: bool = False) -> SceneIR:
+    """Lower the scene's shape to its distance and surface expressions; with
+    `escape_time_sets`, each fractal that has a bailout as its escape-time
+    set instead (-1 inside, 1 outside: what `check --de` marches to)."""
+    lowerer = _Lowerer(scene, escape_time_sets)
     point = ir.components(POINT)
     default = (lowerer.surface_of(DEFAULT_MATERIAL), None)
     distance, surface = lowerer.shape(scene.shape, point, default)
     cut = scene.render.slice
     if cut is not None:
-        # Slicing (seed 002): intersect with the half-space behind the plane;
-        # the cut face is part of the plane, so its normal is the plane's.
+        # Slicing (the blog post "Rendering Julia sets and the Mandelbulb"):
+        # intersect with the half-space behind the plane; the cut face is
+        # part of the plane, so its normal is the plane's.
         length = math.sqrt(sum(c * c for c in cut.normal))
         plane = ir.const(-cut.offset)
         for p, c in zip(point, cut.normal):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import gc
 import re
 from array import array
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from itertools import islice
 from sys import intern
@@ -94,6 +94,7 @@ def _span(meta_or_token) -> Span:
 
 
 _EXPRESSIONS = {"vector", "negate", "binary", "call", "method", "field", "named_arg", "positional_arg"}
+_CHAINS = {"union_chain", "intersection_chain"}
 
 
 class _DepthTree(Tree):
@@ -104,16 +105,33 @@ class _DepthTree(Tree):
 
     def __init__(self, data, children, meta=None):
         super().__init__(data, children, meta)
-        # Only expressions and argument lists look at their children: the
-        # helper nodes of `x*` lists grow one child at a time.
-        below = max((c.depth for c in children if isinstance(c, _DepthTree)), default=0) \
-            if data in _EXPRESSIONS or data == "args" else 0
-        self.depth = below + 1 if data in _EXPRESSIONS else below
+        if data in _CHAINS:      # a chain is one level above its deepest operand, however long
+            first, last = children[0], children[2]
+            so_far = first.depth - 1 if isinstance(first, _DepthTree) and first.data == data else _depth(first)
+            self.depth = max(so_far, _depth(last)) + 1
+        else:
+            # Only expressions and argument lists look at their children: the
+            # helper nodes of `x*` lists grow one child at a time.
+            below = max((c.depth for c in children if isinstance(c, _DepthTree)), default=0) \
+                if data in _EXPRESSIONS or data in ("args", "chain") else 0
+            self.depth = below + 1 if data in _EXPRESSIONS else below
         if self.depth > MAX_NESTING:
-            # A binary node is at its operator; others at their first token.
-            where = children[1] if data == "binary" else next(
+            # A binary node or chain is at its operator; others at their first token.
+            where = children[1] if data == "binary" or data in _CHAINS else next(
                 (c for c in children if isinstance(c, Token)), children[0])
             raise _NestingError(where)
+
+
+def _depth(child) -> int:
+    return child.depth if isinstance(child, _DepthTree) else 0
+
+
+class _Operands:
+    """A chain's operator and operands, while Lark reads it."""
+    __slots__ = ("op", "items")
+
+    def __init__(self, op: str, items: list):
+        self.op, self.items = op, items
 
 
 @v_args(meta=True)
@@ -137,6 +155,19 @@ class _ToAst(Transformer_NonRecursive):
     def binary(self, meta, c):
         left, op, right = c
         return ast.Binary(str(op), left, right, _span(meta))
+
+    def union_chain(self, meta, c):
+        """The operands so far (one list, grown in place: linear time)."""
+        operands, op, right = c
+        if not isinstance(operands, _Operands):
+            operands = _Operands(str(op), [operands])
+        operands.items.append(right)
+        return operands
+
+    intersection_chain = union_chain
+
+    def chain(self, meta, c):
+        return ast.Chain(c[0].op, tuple(c[0].items), _span(meta))
 
     def call(self, meta, c):
         args = c[1] or ()
@@ -260,8 +291,9 @@ def _expected_words(expected) -> str:
     return ", ".join(words)
 
 
-def _syntax_message(error: UnexpectedInput, before: str = "") -> str:
-    """What went wrong; `before` is the text of the error's line before it."""
+def _syntax_message(error: UnexpectedInput, before: str = "", bracket: str | None = None) -> str:
+    """What went wrong; `before` is the text of the error's line before it,
+    `bracket` the innermost one open there."""
     if isinstance(error, UnexpectedCharacters):
         if error.char == '"':
             return "unterminated string: a string ends with '\"' on the line it starts"
@@ -270,9 +302,11 @@ def _syntax_message(error: UnexpectedInput, before: str = "") -> str:
         return "unexpected end of the file (an unclosed bracket?)"
     assert isinstance(error, UnexpectedToken)
     token, expected = error.token, set(error.expected)
-    if token.type == "NAME" and {"COMMA", "_NL"} & expected and "RBRACE" in expected \
-            and "NUMBER" not in expected:
-        return f"missing ',' or new line before '{token}' (block entries are separated by commas or new lines)"
+    if token.type == "NAME" and {"COMMA", "_NL"} & expected and "NUMBER" not in expected:
+        if bracket == "{" and "RBRACE" in expected:
+            return f"missing ',' or new line before '{token}' (block entries are separated by commas or new lines)"
+        if bracket in ("(", "[") and "COMMA" in expected:
+            return f"missing ',' before '{token}' (arguments and components are separated by commas)"
     if token.type == "$END":
         return f"unexpected end of the file, expected {_expected_words(expected)}"
     if token.type == "STRING":
@@ -300,7 +334,8 @@ _DECL_WORDS = frozenset({"param", "let", "material", "scene", "camera", "light",
 # Declarations of a name and a block: `material NAME { ... }`
 _NAMED_BLOCKS = {"material": ast.MaterialDecl, "light": ast.LightDecl, "preset": ast.PresetDecl}
 _COMPARISONS = frozenset({"<", "<=", ">", ">=", "==", "!="})
-_PRECEDENCE = {"|": 1, "&": 2, **{c: 2.5 for c in _COMPARISONS}, "+": 3, "-": 3, "*": 4, "/": 4}
+# of the operators `arithmetic` reads; `|` and `&` chains are `expr`'s
+_PRECEDENCE = {**{c: 2.5 for c in _COMPARISONS}, "+": 3, "-": 3, "*": 4, "/": 4}
 _STATEMENT_WORDS = frozenset({"init", "final", "if", "else"})     # keywords where a statement starts
 _SEPARATORS = frozenset({",", "\n"})
 # The fast parser hands anything this deep to Lark, which reports the
@@ -548,7 +583,34 @@ class _FastParser:
 
     # expressions
     def expr(self):
-        """Binary operators, left to right by precedence, without recursion."""
+        """A '|' chain of '&' chains of arithmetic (a chain of one operand is
+        that operand), in one frame: a bracket costs the stack two more."""
+        kinds = self.kinds
+        chains = (("&", [], []), ("|", [], []))   # each chain being read: its operands and their depths
+        starts = {}
+        while True:
+            node = self.arithmetic()
+            for op, operands, depths in chains:
+                if not operands and kinds[self.i] != op:
+                    continue                      # no chain of this operator here
+                if not operands:
+                    starts[op] = self.outer
+                operands.append(node)
+                depths.append(self.depth)
+                if kinds[self.i] == op:
+                    break                         # the chain goes on
+                node = ast.Chain(op, tuple(operands), starts[op].to(self.outer))
+                self.depth, self.outer = max(depths) + 1, node.span
+                if self.depth > _FAST_DEPTH:
+                    raise _Stop
+                operands.clear()
+                depths.clear()
+            else:
+                return node
+            self.i += 1
+
+    def arithmetic(self):
+        """Comparisons and + - * /, left to right by precedence, without recursion."""
         node = self.operand()
         kinds, texts = self.kinds, self.texts
         precedence = _PRECEDENCE.get(kinds[self.i])
@@ -721,14 +783,110 @@ def _lark_parse(source: str, text: str, path: str, start: int) -> tuple:
         return _ToAst().transform(_parser().parse(source[start:]))
     except UnexpectedInput as error:
         token = getattr(error, "token", None)
-        if token is not None and token.type == "$END":
+        at_end = isinstance(error, UnexpectedEOF) or (token is not None and token.type == "$END")
+        scan = None
+        if not isinstance(error, UnexpectedCharacters):
+            scan = _scan(source, start, len(source) if at_end else _offset(
+                source, error.line + line_offset, error.column + (column_offset if error.line == 1 else 0)),
+                line_offset, column_offset)
+            unclosed = _unclosed(scan, error, at_end, Span(
+                error.line + line_offset, error.column + (column_offset if error.line == 1 else 0),
+                error.line + line_offset, error.column + (column_offset if error.line == 1 else 0)
+                + len(str(token or " "))) if not at_end else None)
+            if unclosed:
+                raise SceneError([diagnostic(path, text, *unclosed)])
+        bracket = scan.opened[-1].text if scan and scan.opened else None
+        if at_end:
             lines = source_lines(text)
             last = len(lines) - (len(lines) > 1 and lines[-1] == "")   # the line a final break ends
             raise SceneError([diagnostic(path, text, Span(last, len(lines[last - 1]) + 1, last,
                                                           len(lines[last - 1]) + 2), _syntax_message(error))])
         line = source[start:].split("\n")[error.line - 1]
         fail(Span(error.line, error.column, error.line, error.column + len(str(token or " "))),
-             _syntax_message(error, line[:error.column - 1]))
+             _syntax_message(error, line[:error.column - 1], bracket))
     except _NestingError as error:
         where = error.token
         fail(_span(where.meta if isinstance(where, Tree) else where), f"nesting deeper than {MAX_NESTING} levels")
+
+
+_CLOSERS = {"(": ")", "[": "]", "{": "}"}
+_CLOSER_TOKENS = {"(": "RPAR", "[": "RSQB", "{": "RBRACE"}
+
+
+@dataclass(frozen=True)
+class _Read:
+    """A token read before an error: its text and where it starts and ends."""
+    text: str
+    line: int
+    column: int
+    end: int              # the column after it
+
+
+@dataclass(frozen=True)
+class _Scan:
+    """What came before an error: the brackets still open (innermost last),
+    the last token, the first token of the last token's line and the token
+    before that one."""
+    opened: tuple[_Read, ...]
+    last: _Read | None
+    first: _Read | None
+    before: _Read | None
+
+
+def _scan(source: str, start: int, stop: int, line_offset: int, column_offset: int) -> _Scan:
+    """The tokens of `source` from offset `start` (a declaration's start:
+    no bracket open) to offset `stop` (an error's token)."""
+    opened: list[_Read] = []
+    before = last = first = None
+    line, line_start = line_offset + 1, start - column_offset
+    for match in _FAST_TOKEN.finditer(source, start):
+        group = match.lastindex
+        if match.start(group) >= stop or group in (4, 6):
+            break
+        text = match.group(group)
+        if text == "\n":
+            line, line_start = line + 1, match.end()
+            continue
+        read = _Read(text, line, match.start(group) - line_start + 1, match.end(group) - line_start + 1)
+        if last is None or last.line != line:
+            before, first = last, read
+        last = read
+        if text in _CLOSERS:
+            opened.append(read)
+        elif text in ")]}" and opened:
+            opened.pop()
+    return _Scan(tuple(opened), last, first, before)
+
+
+def _unclosed(scan: _Scan, error: UnexpectedInput, at_end: bool, place: Span | None) -> tuple[Span, str] | None:
+    """Where and why, when Lark's error is a bracket left open: just after
+    the last token that should have closed it (or at the error, on the
+    bracket's line) and "unclosed '(' opened at L:C". That is so at the end
+    of the file; where a line after the bracket's starts a declaration
+    (or, inside '(' or '[', a block entry's 'key:'); where the error
+    follows a line break inside '(' or '[' and a closer could come there;
+    and where a declaration's keyword comes inside a bracket."""
+    if not scan.opened:
+        return None
+    bracket, last, first = scan.opened[-1], scan.last, scan.first
+    error_line = place.line if place else 0
+    message = f"unclosed '{bracket.text}' opened at {bracket.line}:{bracket.column}"
+    if at_end:
+        return Span(last.line, last.end, last.line, last.end + 1), f"unexpected end of the file: {message}"
+    token, expected = str(error.token), set(error.expected)
+    closer = _CLOSERS[bracket.text]
+    round_ = bracket.text in "(["                   # newlines inside are space, not separators
+    if first.line > bracket.line and first.line == error_line \
+            and (first.text in _DECL_WORDS or (round_ and token == ":" and last is first)):
+        where, next_text = scan.before, first.text     # a declaration (or a block entry) on a line of its own
+    elif last.line < error_line and round_ and _CLOSER_TOKENS[bracket.text] in expected:
+        where, next_text = last, token
+    elif token in _DECL_WORDS:
+        return place, f"{message}: '{closer}' expected before '{token}'"
+    else:
+        return None
+    if where is None or where.line < bracket.line:
+        return None
+    also = " or ','" if "COMMA" in expected and where is last else ""
+    return Span(where.line, where.end, where.line, where.end + 1), \
+        f"{message}: '{closer}'{also} expected before '{next_text}'"

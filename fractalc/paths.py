@@ -5,7 +5,8 @@ each param a keyframe gives) is a curve through the keyframes that give it,
 held constant before the first and after the last of them; a channel that
 no keyframe gives keeps the scene camera's value (or the param's current
 value). The curve is a cubic Hermite spline with Catmull-Rom tangents for
-non-uniform times; segment k is the cubic Bezier curve (seed 004) with the
+non-uniform times; segment k is the cubic Bezier curve (as in the camera paths
+of Hong and Kook, "Rendering 3-D Fractal Images via Ray Tracing") with the
 control points p_k, p_k + h m_k / 3, p_k+1 - h m_k+1 / 3, p_k+1. It passes
 through every keyframe exactly and its first derivative is continuous.
 Tangents are limited per component as in Fritsch and Carlson's monotone

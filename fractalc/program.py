@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from typing import Union
 
 from . import ir
-from .errors import Span
+from .errors import Diagnostic, Span
 from .stdlib import Parameter, Signature
 
 Vector3 = tuple[float, float, float]
@@ -91,6 +91,8 @@ class Fractal:
     bound: ir.Expr | None                 # a radius holding the fractal (None: not known)
     step: ir.Expr                         # the estimate's factor: check --de's safe step factor
     span: Span
+    growth: object = None                 # formula_code.Growth: |z|'s growth measured, the estimate's kind
+    estimate_reason: str | None = None    # which estimate the kind chose and why (None: the formula's final lines)
 
 
 Shape = Union[Primitive, Combination, Transformed, WithMaterial, Fractal]
@@ -325,3 +327,4 @@ class CheckedScene:
     param_checks: tuple[ParamCheck, ...] = ()
     path: CameraPath | None = None
     presets: tuple[Preset, ...] = ()
+    notes: tuple[Diagnostic, ...] = field(default=(), compare=False)   # what check says of a scene it accepts

@@ -529,10 +529,11 @@ vec3 refracted(vec3 dir, vec3 normal, real eta) {
     return v3_select(v3_normalize(bent), dir, k < 0.0f);
 }
 
-// Through a transparent solid entered at p (seed 000, seed 004): the ray
-// `dir` refracts in (ratio 1 / ior), marches inside to the far side and
-// refracts out; returns the way out, and in *out_start where the ray goes
-// on (lifted off the far side). Lanes not `active` are not marched.
+// Through a transparent solid entered at p (transparency as the dissertation
+// plan asks, refraction as in Hong and Kook's ray tracer): the ray `dir`
+// refracts in (ratio 1 / ior), marches inside to the far side and refracts
+// out; returns the way out, and in *out_start where the ray goes on (lifted
+// off the far side). Lanes not `active` are not marched.
 vec3 through_solid(vec3 p, vec3 dir, vec3 normal, real ior, real threshold, mask active, vec3 *out_start,
                    __constant scalar *params) {
     vec3 inside_dir = refracted(dir, normal, 1.0f / ior);

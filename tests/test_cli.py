@@ -303,6 +303,19 @@ def test_top_level_help_lists_the_commands(tmp_path):
         assert command in result.stdout
 
 
+def test_the_product_names_its_sources_not_their_file_numbers(tmp_path):
+    """Users have no "seed 000" (issue 21): the code, library, docs (images'
+    metadata included), examples and help name the works themselves."""
+    root = Path(__file__).resolve().parents[1]
+    numbered = re.compile(rb"seed 0\d\d|seeds? documents?|^Seed:", re.I | re.M)
+    files = [root / "README.md"] + [p for folder in ("fractalc", "docs", "stdlib_cl", "stdlib_frac", "examples")
+                                    for p in (root / folder).rglob("*")
+                                    if p.is_file() and "__pycache__" not in p.parts]
+    assert [str(p.relative_to(root)) for p in files if numbered.search(p.read_bytes())] == []
+    result = fractalc_cli("bench", "--help", cwd=tmp_path)
+    assert "dissertation plan" in result.stdout and not numbered.search(result.stdout.encode())
+
+
 @pytest.fixture(scope="module")
 def device_lines(tmp_path_factory):
     result = fractalc_cli("devices", cwd=tmp_path_factory.mktemp("devices"))

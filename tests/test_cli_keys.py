@@ -83,6 +83,22 @@ def test_mistakes_are_usage_errors_naming_the_option(scene_file, tmp_path, capsy
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ball.frac"]
 
 
+@pytest.mark.parametrize("command", ["check", "render", "compile", "animate", "bench", "view"])
+def test_an_unknown_param_is_a_command_line_mistake(tmp_path, capsys, command):
+    """`--set powr=5` was reported at the scene file's 1:1 (issue 21): it is
+    the command line's mistake, in one line, with the closest param."""
+    path = tmp_path / "bulb.frac"
+    path.write_text("param power = 8 in [2, 16]\n" + SCENE.replace("sphere(1)", "sphere(power / 8)"))
+    output = {"render": ["-o", str(tmp_path / "out.png")], "compile": ["-o", str(tmp_path / "out.cl")],
+              "animate": ["-o", str(tmp_path / "f%02d.png")], "bench": ["--frames", "1"]}.get(command, [])
+    assert exit_code([command, str(path), *output, "--set", "power=4", "--set", "powr=5"]) == 2
+    assert capsys.readouterr().err == ("fractalc: error: --set powr=5: the scene has no param 'powr'; "
+                                       "did you mean 'power'?\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bulb.frac"]
+    assert exit_code([command, str(tmp_path / "bulb.frac"), *output, "--set", "x=1"]) == 2
+    assert "--set x=1: the scene has no param 'x' (its params: power)" in capsys.readouterr().err
+
+
 def test_animate_frames_take_the_keys(scene_file, tmp_path):
     pattern = str(tmp_path / "frames" / "f%02d.exr")
     assert main(["animate", str(scene_file), "-o", pattern, "--fps", "1", "-q"]) == 0

@@ -167,15 +167,15 @@ COMMANDS = [["check"], ["compile", "-o", "{tmp}/out.cl"], ["render", "-o", "{tmp
 
 
 @pytest.mark.parametrize("command", COMMANDS, ids=[c[0] for c in COMMANDS])
-@pytest.mark.parametrize("kind", ["directory", "/dev/null", "/dev/zero"])
+@pytest.mark.parametrize("kind", ["directory", "/dev/null", "/dev/zero", "missing"])
 def test_cli_refuses_a_path_that_is_no_file_as_a_usage_error(tmp_path, capsys, command, kind):
-    path = str(tmp_path) if kind == "directory" else kind
+    path = {"directory": str(tmp_path), "missing": str(tmp_path / "none.frac")}.get(kind, kind)
     argv = [command[0], path] + [a.format(tmp=tmp_path) for a in command[1:]]
     assert main(argv) == 2
-    err = capsys.readouterr().err
-    reason = "a directory" if kind == "directory" else "a device"
-    assert f"fractalc: error: cannot read {path}: it is {reason}, not a scene file" in err
-    assert "Traceback" not in err
+    reason = {"directory": "it is a directory, not a scene file", "missing": "no such file"}.get(
+        kind, "it is a device, not a scene file")
+    # the one error line, no argparse usage block (issue 21)
+    assert capsys.readouterr().err == f"fractalc: error: cannot read {path}: {reason}\n"
 
 
 @pytest.mark.parametrize("kind", ["directory", "/dev/zero", "missing"])
@@ -193,6 +193,61 @@ def test_a_fifo_is_refused_at_once_not_waited_on(fifo):
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2
     assert result.stderr.strip().endswith("it is a FIFO (named pipe), not a scene file")
+
+
+# ---- 4b. a bracket left open -------------------------------------------------
+
+UNCLOSED = [
+    # (text with » where the error goes, its message)
+    ("scene sphere(1)\ncamera {\n    position: (0, -3.2, 1.0»\n    fov: 40\n}\n",
+     "unclosed '(' opened at 3:15: ')' or ',' expected before 'fov'"),
+    ("scene sphere(1)\ncamera {\n    position: (0, -3.2, 1.0,»\n    fov: 40\n}\n",
+     "unclosed '(' opened at 3:15: ')' expected before 'fov'"),
+    ("scene sphere(1)\ncamera {\n    position: (0, -3.2, 1.0)\n    fov: 40»\nlight point { position: (1, 1, 1) }\n",
+     "unclosed '{' opened at 2:8: '}' expected before 'light'"),
+    ("formula f() {\n    z = 2 * z + c»\nscene fractal(f())\n",
+     "unclosed '{' opened at 1:13: '}' expected before 'scene'"),
+    ("let a = box((1, 2, 3)»\nscene a\n", "unclosed '(' opened at 1:12: ')' or ',' expected before 'scene'"),
+    ("scene union(sphere(1), box(2) »render { width: 64 }\n",
+     "unclosed '(' opened at 1:12: ')' expected before 'render'"),
+    ("scene sphere(1)\ncamera {\n    position: (0, -3.2, 1.0)\n    fov: 40»\n",
+     "unexpected end of the file: unclosed '{' opened at 2:8"),
+]
+
+
+def _marked(text: str) -> tuple[str, int, int]:
+    before, after = text.split("»")
+    return before + after, before.count("\n") + 1, len(before) - before.rfind("\n")
+
+
+@pytest.mark.parametrize("marked, message", UNCLOSED)
+def test_a_bracket_left_open_is_named_with_where_it_opened(marked, message):
+    """A missing ')' or '}' was "missing ',' or new line before 'fov'" on the
+    next line (issue 21): the bracket still open, where it opened, and the
+    caret where its closer is missing."""
+    text, line, column = _marked(marked)
+    with pytest.raises(fractalc.SceneError) as error:
+        parse(text)
+    assert (error.value.line, error.value.column, error.value.message) == (line, column, message)
+
+
+@pytest.mark.parametrize("marked, message", UNCLOSED + [
+    ("scene union(sphere(1), box(1) »box(2))\n", "missing ',' before 'box'"),
+    ("scene sphere(1)\nrender { width: 3 »height: 4 }\n", "missing ',' or new line before 'height'")])
+def test_both_parsers_give_the_same_diagnostics(marked, message):
+    """After valid declarations that the fast parser reads, its error is the
+    one Lark gives reading the whole file (the fast parser hands the rest
+    to Lark from the declaration before)."""
+    from fractalc import parse as parse_module
+    prefix = "let a0 = 1\n" * 50
+    text = prefix + _marked(marked)[0]
+    with pytest.raises(fractalc.SceneError) as fast:
+        parse(text)
+    with pytest.raises(fractalc.SceneError) as lark:
+        parse_module._lark_parse(text, text, "<string>", 0)
+    assert str(fast.value) == str(lark.value)
+    assert fast.value.line == _marked(marked)[1] + 50
+    assert fast.value.message.startswith(message.split(" opened at")[0])
 
 
 # ---- 5. bounded effort ----------------------------------------------------------
@@ -216,10 +271,26 @@ def test_nesting_counts_brackets_and_unary_minus_together():
     assert nesting_column("scene sphere(" + "-(" * 200 + "1" + ")" * 200 + ")") == len("scene sphere(") + 256
 
 
-def test_an_operator_chain_stops_at_the_operator_that_passes_the_limit():
-    # A call is a level too: the 256th '|' holds 257 levels.
-    column = nesting_column("scene " + " | ".join(["sphere()"] * 1000))
-    assert column == len("scene ") + 256 * len("sphere() | ") - 1
+def test_a_chain_of_subtractions_stops_at_the_operator_that_passes_the_limit():
+    # A call is a level too: the 256th '-' holds 257 levels.
+    column = nesting_column("scene " + " - ".join(["sphere()"] * 1000))
+    assert column == len("scene ") + 256 * len("sphere() - ") - 1
+
+
+@pytest.mark.parametrize("op, combine", [("|", "union"), ("&", "intersect")])
+def test_a_chain_of_unions_or_intersections_is_one_level(op, combine):
+    """300 shapes joined by '|' were refused as nesting deeper than 256
+    levels while union(...) of them rendered (issue 21): a chain of one
+    operator is one node, however long, and means the same."""
+    from fractalc import ast
+    from fractalc.lower import lower
+    spheres = [f"sphere(1).translate(({i * 0.01}, 0, 0))" for i in range(300)]
+    chain = parse(f"scene {f' {op} '.join(spheres)}\n")
+    assert isinstance(chain.decls[0].shape, ast.Chain) and len(chain.decls[0].shape.operands) == 300
+    joined = fractalc.loads(f"scene {f' {op} '.join(spheres)}\n{CAMERA}")
+    called = fractalc.loads(f"scene {combine}({', '.join(spheres)})\n{CAMERA}")
+    # the same distance and surface expressions (the IR is interned: equal is identical)
+    assert lower(joined.checked).distance is lower(called.checked).distance
 
 
 def test_a_minus_after_an_operand_is_binary_not_nesting():
@@ -229,7 +300,7 @@ def test_a_minus_after_an_operand_is_binary_not_nesting():
 HOSTILE = {
     "minus signs": "'scene ' + '-' * N + '1'",
     "open brackets": "'scene ' + '(' * N + '1'",
-    "operator chain": "'scene ' + '1|' * (N // 2) + '1'",
+    "operator chain": "'scene ' + '1-' * (N // 2) + '1'",
     "bad lines": "'let = \\n' * (N // 7)",
 }
 

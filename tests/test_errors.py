@@ -40,7 +40,7 @@ def case(name, marked, mentions=None):
 CASES = [
     # ---- syntax
     case("unclosed paren", f"scene union(sphere(1), box(2) »render {{ width: 64 }}"),
-    case("unclosed paren, next line", f"scene sphere(1.5\n»{CAMERA}"),
+    case("unclosed paren, next line", f"scene sphere(1.5»\n{CAMERA}", "unclosed '(' opened at 1:13"),
     case("missing comma in block",
          "scene sphere()\ncamera { position: (0, 0, 5) »target: (0, 0, 0) }"),
     case("missing value", "scene sphere()\nrender { width: »}"),
@@ -77,6 +77,11 @@ CASES = [
     case("zero width", "scene sphere()\nrender { width: »0 }"),
     case("fractional max_steps", "scene sphere()\nrender { max_steps: »1.5 }"),
     case("specular", "scene sphere()\nmaterial m { color: (1, 0, 0), specular: »2 }"),
+    case("spot light aimed twice", "scene sphere()\nlight spot { position: (0, 0, 3), direction: (0, 0, -1), "
+                                   "»target: (0, 0, 0) }", "'direction' or 'target', not both"),
+    case("spot light aimed at itself", "scene sphere()\nlight spot { position: (0, 0, 3), target: »(0, 0, 3) }",
+         "target is its position"),
+    case("spot light aimed nowhere", "scene sphere()\n»light spot { position: (0, 0, 3) }", "or 'target'"),
     # ---- duplicates and missing declarations
     case("duplicate camera", f"scene sphere()\n{CAMERA}\n»{CAMERA}"),
     case("duplicate scene", "scene sphere()\n»scene box()"),
@@ -133,6 +138,21 @@ def test_param_override_outside_its_range():
     scene_error("param r = 0.7 in [0.1, 2]\nscene sphere(r)", params={"r": 5})
 
 
+def test_an_unknown_param_is_the_callers_mistake_naming_the_closest():
+    """Was a SceneError at the file's 1:1 (issue 21): nothing in the file is wrong."""
+    with pytest.raises(ValueError, match=r"^the scene has no param 'radus'; did you mean 'radius'\?$"):
+        fractalc.loads("param radius = 0.7 in [0.1, 2]\nscene sphere(radius)", params={"radus": 1})
+
+
+@pytest.mark.parametrize("kind, size", [("spot", ""), ("rectangle", ", width: 2")])
+def test_a_spot_or_rectangle_light_faces_its_target(kind, size):
+    """As a camera does: `target` stands for `direction: target - position`."""
+    def light(aim):
+        return fractalc.loads(f"scene sphere()\nlight {kind} {{ position: (1, -2, 3), {aim}{size} }}").checked.lights[0]
+    aimed = light("target: (0.5, 0, 1)")
+    assert aimed == light("direction: (-0.5, 2, -2)") and aimed.direction == (-0.5, 2.0, -2.0)
+
+
 # -------------------------------------------------------------- command line
 
 def check(tmp_path, text, name="bad.frac"):
@@ -157,12 +177,25 @@ def assert_scene_error(result, prefix):
 def test_check_accepts_a_good_scene(tmp_path):
     result = check(tmp_path, f"scene sphere()\n{CAMERA}\n", name="good.frac")
     assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("good.frac: ok: 1 part (1 shape);")
+
+
+def test_check_says_in_one_line_what_it_checked(tmp_path):
+    """A silent `check` left a user unsure anything ran (issue 21)."""
+    text = ("param power = 8 in [2, 16]\nformula twice() {\n    z = 2 * z + c\n}\n"
+            "scene union(mandelbulb(power), fractal(twice(), bound: 2).translate((3, 0, 0)), plane(offset: -2))\n"
+            f"{CAMERA}\nlight point {{ position: (1, 2, 3) }}\nrender {{ fog: {{ density: 0.1 }} }}\n")
+    result = check(tmp_path, text, name="good.frac")
+    assert result.returncode == 0 and result.stderr.startswith("good.frac:5:32: note: the fractal gets the linear")
+    assert result.stdout.count("\n") == 1
+    assert result.stdout.startswith("good.frac: ok: 5 parts (1 shape, 2 fractals, 1 combination, 1 transform); "
+                                    "formulas: mandelbulb, twice; 1 param (power); 1 light; kernel features: fog")
 
 
 @pytest.mark.parametrize("name", ["bad.frac", "scenes/bad.frac"])
 @pytest.mark.parametrize("marked", [
     "# a comment\nscene union(sphere(), »sphre(1))",
-    "scene sphere(1\n»render { width: 64 }",
+    "scene sphere(1»\nrender { width: 64 }",
 ])
 def test_check_reports_errors_with_the_given_path(tmp_path, marked, name):
     text, [(line, column)] = locate(marked)

@@ -52,6 +52,11 @@ MISTAKES = [
     (DOUBLE + "scene fractal(f(), julia: (1, 2, 3, 4))", "4:7", "'julia' must be a 3-vector like z"),
     ("formula f() {\n    z = z * 2 + c\n    final distance = length(z)\n}\nformula g() {\n    z = z * 3 + c\n}\n"
      "scene fractal(hybrid(f(), g()))", "8:7", "gives its own 'final distance': it cannot be part of a hybrid"),
+    ("formula q() {\n    init z = (z, 0)\n    z = quaternion_square(z) + c\n}\n" + DOUBLE.replace("f()", "g()")
+     + "scene fractal(hybrid(q(), g()), iterations: 8)", "8:15",
+     "a hybrid's formulas must all work on 3-vectors or all on 4-vectors: 'q' makes z a 4-vector"),
+    ("formula f() {\n    z = z * 2 / dr + c\n}\nscene fractal(f())", "2:17",
+     "'dr' is the compiler's derivative at the orbit's end: only 'final' lines read it"),
     ("formula f() {\n    z = floor(z) * 2 + c\n}\nscene fractal(f())", "2:9",
      "the distance estimate cannot be derived through this"),
     ("formula f() {\n    z = z * 2 + c\n    final distance = z\n}\nscene fractal(f())", "3:22",
@@ -259,6 +264,120 @@ def test_a_files_formula_replaces_the_librarys():
     # z = 3 (3p + p) + p = 13 p; dr = 3 (3 + 1) + 1 = 13: the linear estimate is |p|
     np.testing.assert_allclose(scene.distance(np.array([[0.5, 0.2, 0.1]])), [np.linalg.norm([0.5, 0.2, 0.1])],
                                rtol=1e-5)
+
+
+def test_a_formula_that_hides_the_librarys_says_so_once_and_the_librarys_is_still_reachable(tmp_path, capsys):
+    """A file's formula replaced the library's of its name silently (issue
+    21): a note names the hidden one, and `library.NAME(...)` still calls it."""
+    from fractalc import cli
+    text = ("formula amazing_box(scale = 3) {\n    z = scale * z + c\n}\n"
+            "scene fractal(hybrid(amazing_box(), amazing_box(2), library.amazing_box(scale: 2)), iterations: 3)\n")
+    checked = fractalc.loads(text, path="t.frac").checked
+    uses = checked.shape.sequence
+    assert [u.formula.file for u in uses[:2]] == ["t.frac"] * 2 and uses[2].formula.file.endswith("formulas.frac")
+    # the library's and the file's, with the same arguments, are two formulas of a hybrid
+    mine = "formula bulb(power = 8) {\n    z = triplex_power(z, power) * 0.5 + c\n}\n"
+    both, twice = (fractalc.loads(f"{mine}scene fractal(hybrid({hybrid}), iterations: 4)").checked.shape
+                   for hybrid in ("bulb(8), library.bulb(8)", "bulb(8) * 2"))
+    assert formula_code.orbit(both.sequence, POINT, both.iterations, both.bailout).distance is not \
+        formula_code.orbit(twice.sequence, POINT, twice.iterations, twice.bailout).distance
+    (note,) = checked.notes
+    assert str(note).startswith("t.frac:1:9: note: 'amazing_box' hides the library formula of that name "
+                                "(stdlib_frac/formulas.frac:")
+    assert "the library's is still 'library.amazing_box(...)'" in note.message
+    (tmp_path / "t.frac").write_text(text)
+    assert cli.main(["check", str(tmp_path / "t.frac")]) == 0
+    assert capsys.readouterr().err.count("note: 'amazing_box' hides") == 1
+    assert "the library has no formula 'amazng_box' (did you mean 'amazing_box'?)" in \
+        _error("scene fractal(library.amazng_box())")
+
+
+def _final_estimate(step: str, final: str, iterations: int, points):
+    text = f"formula f() {{\n    {step}\n    final distance = {final}\n}}\nscene fractal(f(), iterations: {iterations})"
+    shape = fractalc.loads(text).checked.shape
+    found = formula_code.orbit(shape.sequence, POINT, shape.iterations, shape.bailout)
+    return ir.evaluate_at((found.distance,), points)[0], found.scalar
+
+
+def test_final_lines_read_the_running_derivative_as_dr():
+    """`final distance = (length(z) - 1) / dr` was "unknown name 'dr'" (issue
+    21). Scalar path: a box fold then 2 z + c, dr = 2^(n+1) - 1; Jacobian
+    path: a stretch S then + c, J_n = I + S + ... + S^n and dr = |J^T z| / |z|."""
+    points = np.random.default_rng(12).uniform(-1.5, 1.5, (64, 3))
+    got, scalar = _final_estimate("z = box_fold(z, 1) * 2 + c", "(length(z) - 1) / dr", 4, points)
+    z = points.copy()
+    for _ in range(4):
+        z = 2 * (np.clip(z, -1, 1) * 2 - z) + points
+    assert scalar
+    np.testing.assert_allclose(got, (np.linalg.norm(z, axis=1) - 1) / (2 ** 5 - 1), rtol=1e-12)
+    stretch = np.array([1.0, 2.0, 1.5])
+    got, scalar = _final_estimate("z = stretch(z, (1, 2, 1.5)) + c", "(length(z) - 1) / dr", 3, points)
+    z, jacobian = points.copy(), np.ones(3)
+    for _ in range(3):
+        z, jacobian = z * stretch + points, jacobian * stretch + 1
+    r = np.linalg.norm(z, axis=1)
+    assert not scalar
+    np.testing.assert_allclose(got, (r - 1) * r / np.linalg.norm(z * jacobian, axis=1), rtol=1e-12)
+
+
+def test_final_lines_read_the_jacobians_spectral_norm_as_jacobian_norm():
+    """A shear then + c: J_n = I + M + ... + M^n, not a similarity; its
+    spectral norm (numpy's largest singular value), and |dr| on the scalar
+    path, where a similarity's Jacobian is dr times a rotation."""
+    points = np.random.default_rng(13).uniform(-1, 1, (64, 3))
+    got, scalar = _final_estimate("z = (z.x + 0.5 * z.y, z.y, 1.2 * z.z - 0.3 * z.x) + c",
+                                  "length(z) / jacobian_norm", 3, points)
+    m = np.array([[1, 0.5, 0], [0, 1, 0], [-0.3, 0, 1.2]])
+    jacobian = sum(np.linalg.matrix_power(m, k) for k in range(4))
+    z = points.copy()
+    for _ in range(3):
+        z = z @ m.T + points
+    assert not scalar
+    np.testing.assert_allclose(got, np.linalg.norm(z, axis=1) / np.linalg.norm(jacobian, 2), rtol=1e-9)
+    got, scalar = _final_estimate("z = box_fold(z, 1) * 2 + c", "length(z) / jacobian_norm", 4, points)
+    assert scalar
+    np.testing.assert_allclose(got, _final_estimate("z = box_fold(z, 1) * 2 + c", "length(z) / dr", 4, points)[0],
+                               rtol=1e-15)
+
+
+# The issue's two pairs (issue 21): one map, two spellings each.
+ROTATED_FOLD = {
+    "by hand": "    a = radians(40 * z.z)\n    z = (cos(a) * z.x - sin(a) * z.y, sin(a) * z.x + cos(a) * z.y, z.z)\n"
+               "    z = clamp(z, -1, 1) * 2 - z\n    z = 2 * z + c\n",
+    "blocks": "    z = rotate(z, (0, 0, 1), 40 * z.z)\n    z = box_fold(z, 1)\n    z = 2 * z + c\n",
+}
+SQUARED = {"scaled": "    z = scale(z, length(z)) + c\n", "multiplied": "    z = z * length(z) + c\n"}
+ROTATED_FOLD_USE = "iterations: 6, bailout: 100, julia: (0.3, -0.2, 0.1), bound: 12"
+SQUARED_USE = "iterations: 8, bound: 2"
+
+
+def pair_scene(body: str, use: str) -> str:
+    return f"formula f() {{\n{body}}}\nscene fractal(f(), {use})\n"
+
+
+@pytest.mark.parametrize("spellings, use, estimate", [
+    (ROTATED_FOLD, ROTATED_FOLD_USE, formula_code.Estimate.LINEAR),
+    (SQUARED, SQUARED_USE, formula_code.Estimate.ESCAPE_TIME)], ids=["rotated fold", "squared"])
+def test_the_estimates_kind_is_the_maps_growth_whatever_its_spelling(spellings, use, estimate):
+    """A hand-written rotation and clamp fold got the escape-time estimate,
+    `scale(z, length(z))` the linear one (issue 21): the kind is measured
+    from how |z| grows, so each spelling gets the same, right kind, the
+    same estimate, and a note that says why."""
+    points = np.random.default_rng(14).uniform(-3, 3, (200, 3))
+    found = []
+    for body in spellings.values():
+        shape = fractalc.loads(pair_scene(body, use)).checked.shape
+        assert shape.growth.estimate is estimate
+        assert shape.estimate_reason.startswith(f"the {estimate.value} estimate")
+        orbit = formula_code.orbit(shape.sequence, POINT, shape.iterations, shape.bailout, shape.julia,
+                                   estimate=shape.growth.estimate)
+        found.append(ir.evaluate_at((orbit.distance,), points)[0])
+    np.testing.assert_allclose(found[0], found[1], rtol=1e-9, atol=1e-12)
+
+
+def test_a_formula_that_gives_its_own_estimate_gets_no_note_of_the_kind():
+    text = "formula f() {\n    z = z * length(z) + c\n    final distance = linear_estimate()\n}\nscene fractal(f())"
+    assert fractalc.loads(text).checked.shape.estimate_reason is None
 
 
 def test_an_underivable_step_is_allowed_with_the_formulas_own_estimate():

@@ -129,16 +129,17 @@ def orbit_ir(case: Case, jacobian=None, julia=None, constants=True):
     """The estimate's IR: with the case's arguments as constants (for the
     float64 IR evaluator) or as params (for the kernel)."""
     uses = _layout(case)
-    if constants:
-        values = param_values(case)
-        uses = tuple(formula_code.Use(u.formula, tuple(
-            ir.Vec(tuple(ir.const(values[x.index]) for x in a.items)) if isinstance(a, ir.Vec)
-            else ir.const(values[a.index]) for a in u.args)) for u in uses)
+    values = param_values(case)
+    constant_uses = tuple(formula_code.Use(u.formula, tuple(
+        ir.Vec(tuple(ir.const(values[x.index]) for x in a.items)) if isinstance(a, ir.Vec)
+        else ir.const(values[a.index]) for a in u.args)) for u in uses)
     bailout = None if case.bailout is None else ir.const(case.bailout)
     julia = julia if julia is not None else case.julia
     julia = None if julia is None else ir.Vec(tuple(ir.const(x) for x in julia))
-    return formula_code.orbit(uses, POINT, ir.Const(float(case.iterations), ir.INT), bailout, julia,
-                              jacobian=jacobian)
+    # the estimate's kind as the checker measures it, at the case's argument values
+    estimate = formula_code.growth(constant_uses, julia).estimate
+    return formula_code.orbit(constant_uses if constants else uses, POINT, ir.Const(float(case.iterations), ir.INT),
+                              bailout, julia, jacobian=jacobian, estimate=estimate)
 
 
 _KERNEL = """

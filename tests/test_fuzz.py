@@ -88,7 +88,10 @@ def test_the_check_command_answers_like_the_api(index, tmp_path, capsys):
         assert status == 2
         assert re.match(re.escape(str(path)) + r":\d+:\d+: error: \S", err), err
     elif verdict.outcome == "checked":
-        assert (status, out, err) == (0, "", "")
+        # one line of what was checked; on stderr only notes (each with its quoted line and caret)
+        assert status == 0 and out.startswith(f"{path}: ok: ") and out.count("\n") == 1, (out, err)
+        headers = [line for line in err.splitlines() if not line.startswith("    ")]
+        assert all(line.startswith(f"{path}:") and ": note: " in line for line in headers), err
     else:
         pytest.fail(report(SEED + 2, [(index, case, verdict)]))
 

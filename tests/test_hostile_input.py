@@ -155,6 +155,30 @@ def test_a_cycle_of_lets_is_a_located_error(tmp_path, capsys):
     assert ":1:5: error: 'a' is defined in terms of itself (a -> b -> c -> a)" in printed
 
 
+@pytest.mark.parametrize("text, cycle", [
+    ("let a = a.x\nscene sphere(1)\n", "a -> a"),                      # through a component (issue 21)
+    ("let a = (b.y, 1, 2)\nlet b = a.xy\nscene sphere(1)\n", "a -> b -> a"),
+    ("let a = sphere(1).translate(b)\nlet b = (a.x, 0, 0)\nscene a\n", "a -> b -> a"),
+])
+def test_a_cycle_through_any_kind_of_expression_is_a_located_error(text, cycle, tmp_path, capsys):
+    printed = _check_errors(text, tmp_path, capsys)
+    assert f":1:5: error: 'a' is defined in terms of itself ({cycle})" in printed
+
+
+def test_every_pass_walks_every_field_that_holds_nodes():
+    """ast.children is the one walk: it finds each node of every kind."""
+    from fractalc import ast
+    from fractalc.parse import parse
+    program = parse("param p = 1 in [0, q]\nlet a = -(p, 2).xy.x | f(k: b.y, r.m(s))\nscene a\n"
+                    "camera { position: (t, 0, 0) }\npath { 0: { fov: u }, 1: { fov: 2 } }\n"
+                    "formula g(w = v) {\n init k = x\n if y < 1 { z = z } else { z = -z }\n final distance = d\n}\n")
+    names = {n.name for n in ast.walk(program) if isinstance(n, ast.Name)}
+    assert names == {"p", "q", "a", "b", "r", "s", "t", "u", "v", "x", "y", "z", "d"}
+    # nodes inside a node are found once each
+    nodes = list(ast.walk(program))
+    assert len(nodes) == len({id(n) for n in nodes})
+
+
 def test_lets_that_double_the_scene_each_time_are_a_located_error(tmp_path, capsys):
     """A let used twice in each of a chain of lets: 2^40 shapes to lower
     and compile. Refused at the let where the scene grows too large."""

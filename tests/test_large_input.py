@@ -61,6 +61,10 @@ TRICKY = [
     " else if (k != 1) < 3 {\n  z = z.xyz * k\n } else { k = k * 2 }\n z = (z, 1).xzy + c\n"
     " final distance = length(z) / k\n}\nscene fractal(f(), iterations: 3)",
     "formula g() {\n\n z = ((z)).x * (z.y) + c, final distance = 1\n}\nscene fractal(g())",
+    # chains of '|' and '&': one node each, their span with the brackets of their ends
+    "scene (a) | b | (c) | d & e & (f) | -(g) | h.x(1) | (i | j | k) | (l & m) - n | o\n",
+    "formula f() {\n if z.x < 0 & z.y < 0 & (z.z < 0) | z.x > 1 | (z.y > 1) { z = z }\n z = z + c\n}\n"
+    "scene fractal(f())",
 ]
 
 
@@ -88,6 +92,17 @@ def test_a_megabyte_scene_parses_in_seconds():
     args = scene.shape.args
     assert len(args) == (len(text) - len("scene union(box(2))\n")) // len("sphere(), ") + 1
     assert args[-1].span.column == len(text) - len("box(2))\n") + 1
+    assert seconds < 3, f"1 MB took {seconds:.2f} s"
+
+
+def test_a_megabyte_chain_of_unions_parses_in_seconds():
+    """A chain of one operator is one node (issue 21), read in linear time."""
+    count = (1 << 20) // len("sphere() | ")
+    text = "scene " + " | ".join(["sphere()"] * count) + "\n"
+    start = time.process_time()
+    (scene,) = parse(text).decls
+    seconds = time.process_time() - start
+    assert len(scene.shape.operands) == count and scene.shape.operands[-1].span.column == len(text) - 8
     assert seconds < 3, f"1 MB took {seconds:.2f} s"
 
 

@@ -82,7 +82,76 @@ def test_a_thin_set_needs_a_higher_surface_level(tmp_path, capsys):
     (tmp_path / "ifs.frac").write_text("scene fractal(tetra_ifs(), iterations: 6, bound: 1.75)\n")
     path = str(tmp_path / "ifs.frac")
     assert cli.main(["check", "--de", "--rays", "40", path]) == 2
-    assert "no ray met the surface" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "no ray met the surface" in err and "a thin set's may: raise --surface" in err
+    assert "space-filling" not in err
     assert cli.main(["check", "--de", "--rays", "40", "--surface", "1e-2", path]) == 0
     assert "rays met the surface" in capsys.readouterr().out
     assert cli.main(["check", "--de", "--surface", "0", path]) == 2
+
+
+def test_each_spelling_of_a_map_oversteps_alike():
+    """The issue's pairs (issue 21), measured: spelt by hand, the rotated
+    fold oversteps as the library's blocks do (it measured 15.5 with the
+    escape-time estimate it got), and `scale(z, length(z)) + c`, which got
+    the linear estimate and met no surface, never oversteps, as
+    `z * length(z) + c` does."""
+    from test_formula_language import ROTATED_FOLD, ROTATED_FOLD_USE, SQUARED, SQUARED_USE, pair_scene
+    rotated = [overstep.measure(fractalc.loads(pair_scene(body, ROTATED_FOLD_USE)), rays=100, surface=1e-3)
+               for body in ROTATED_FOLD.values()]
+    assert rotated[0].rays == rotated[1].rays > 50
+    assert abs(rotated[0].largest_ratio - rotated[1].largest_ratio) < 1e-3 * rotated[1].largest_ratio
+    squared = [overstep.measure(fractalc.loads(pair_scene(body, SQUARED_USE)), rays=100) for body in SQUARED.values()]
+    assert squared[0].rays == squared[1].rays > 5
+    assert squared[0].largest_ratio == pytest.approx(squared[1].largest_ratio, rel=1e-3)
+    assert squared[0].largest_ratio < 1.0
+
+
+# z = 1.5 z, twice, bailout 3: orbits from |p| <= 4/3 never escape (the
+# escape-time set, a ball), and the formula's own estimate is |p| - 1 there
+# and up to |p| = 2 (a sphere's exact distance), less beyond.
+GROWING = ("formula grow() {\n    z = 1.5 * z\n    final distance = length(z) / 2.25 - 1\n}\n"
+           "scene fractal(grow(), iterations: 2, bailout: 3, bound: 3)\n")
+
+
+def test_the_escape_time_set_is_where_orbits_never_escape():
+    scene = fractalc.loads(GROWING)
+    points = np.random.default_rng(15).uniform(-3, 3, (3000, 3))
+    radius = np.linalg.norm(points, axis=1)
+    clear = np.abs(radius - 4 / 3) > 1e-5
+    np.testing.assert_array_equal((scene.escape_time_set(points) < 0)[clear], (radius <= 4 / 3)[clear])
+    assert overstep.has_escape_time_set(scene)
+    assert not overstep.has_escape_time_set(fractalc.loads("scene fractal(menger_ifs(), bound: 1.75)"))
+
+
+def test_check_de_measures_against_the_estimates_surface_and_the_escape_time_set(tmp_path, capsys):
+    """`check --de` measured only against the estimate's own surface, which
+    can hide how far it oversteps the set the formula means (issue 21):
+    it reports both. Here the estimate is a sphere's exact distance, safe
+    against its own surface, while the set is a ball a third larger: near
+    it the estimate is (1/3 + d) / d times the distance d."""
+    scene = fractalc.loads(GROWING)
+    own = overstep.measure(scene, rays=100)
+    meant = overstep.measure(scene, rays=100, against=overstep.Against.ESCAPE_TIME_SET)
+    assert 0.97 < own.largest_ratio <= 1.001
+    assert meant.largest_ratio > 30 and meant.rays > 20
+    (tmp_path / "grow.frac").write_text(GROWING)
+    assert cli.main(["check", "--de", "--rays", "100", str(tmp_path / "grow.frac")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith(f"{tmp_path / 'grow.frac'}: against the estimate's own surface (what the marcher "
+                               f"sees): {own.rays} rays met the surface")
+    assert lines[1].startswith(f"{tmp_path / 'grow.frac'}: against the escape-time set at the scene's iterations "
+                               f"(what the formula means): {meant.rays} rays met the set")
+    assert f"largest estimate / distance {meant.largest_ratio:.4f}" in lines[1]
+
+
+def test_a_space_filling_formula_is_told_to_give_its_own_estimate(tmp_path, capsys):
+    """A Kaliset's derived estimate is small all through its bound and meets
+    no surface: a noisy ball without a hint (issue 21). The command says
+    what to do; a thin set is told to raise --surface, as before."""
+    (tmp_path / "kali.frac").write_text("formula kali() {\n    z = abs(z) / dot(z, z) + c\n}\n"
+                                        "scene fractal(kali(), iterations: 10, julia: (-0.8, -0.6, -0.5), bound: 2)\n")
+    assert cli.main(["check", "--de", "--rays", "60", str(tmp_path / "kali.frac")]) == 2
+    err = capsys.readouterr().err
+    assert "space-filling formula" in err and "Give the formula its own 'final distance = ...'" in err
+    assert "raise --surface above" in err
