@@ -1,7 +1,14 @@
-"""The long fuzzing run (issue 10); tests/test_fuzz.py is its one-minute form.
+"""The long fuzzing run (issues 10 and 22); tests/test_fuzz.py is its one-minute form.
 
     python benchmarks/fuzz.py --minutes 10 --seed 1 [--build-every 20] [--out fuzz-failures]
     python benchmarks/fuzz.py --seed 1 --case 123      # replay one case, print it and its verdict
+    python benchmarks/fuzz.py --calls --minutes 10 --seed 1   # command lines and API calls
+    python benchmarks/fuzz.py --calls --seed 1 --case 123
+
+With --calls: generated command lines and API calls (tests/fuzz_calls.py),
+each in a forked process under an address-space limit (--headroom MiB beyond
+the server's own); the counts (tried, answered, failed) as it goes and at the
+end, and the first case of each kind of failure in OUT/calls-NNN.txt.
 
 Judges cases seed:0, seed:1, ... (tests/fuzz_scenes.py): every case is
 checked; every `--build-every`-th one that checks is also built and rendered
@@ -20,6 +27,7 @@ import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+import fuzz_calls  # noqa: E402
 import fuzz_scenes  # noqa: E402
 
 
@@ -46,6 +54,42 @@ def write_repro(out: Path, number: int, case, verdict, shrunk, seed: int, index:
     return stem.with_suffix(".frac")
 
 
+def run_calls(args) -> int:
+    """The --calls mode: command lines and API calls until the deadline."""
+    with fuzz_calls.Runner(args.headroom * 2 ** 20) as runner:
+        if args.case is not None:
+            case = fuzz_calls.case(args.seed, args.case)
+            verdict = runner.judge(case)
+            print(f"# case {args.case} of seed {args.seed}: {case}\n# verdict: {verdict.outcome} "
+                  f"{verdict.failure}\n{verdict.detail}")
+            return 0
+        counts, kinds = collections.Counter(), {}
+        deadline, last_print, index = time.monotonic() + args.minutes * 60, time.monotonic(), 0
+        while time.monotonic() < deadline:
+            case = fuzz_calls.case(args.seed, index)
+            verdict = runner.judge(case)
+            counts["tried"] += 1
+            counts[f"{case.kind} {verdict.outcome}"] += 1
+            if verdict.failure:
+                kind = fuzz_calls.signature(case, verdict)
+                kinds[kind] = kinds.get(kind, 0) + 1
+                if kinds[kind] == 1:
+                    args.out.mkdir(parents=True, exist_ok=True)
+                    path = args.out / f"calls-{len(kinds):03d}.txt"
+                    path.write_text(f"{kind}\nseed {args.seed}, case {index}: {case}\nreplay: python "
+                                    f"benchmarks/fuzz.py --calls --seed {args.seed} --case {index}\n\n"
+                                    f"{verdict.detail}\n")
+                    print(f"NEW {path}: {kind} (case {index})", flush=True)
+            index += 1
+            if time.monotonic() - last_print > 30:
+                last_print = time.monotonic()
+                print(f"{dict(counts)}, {len(kinds)} kinds of failure", flush=True)
+    print(f"calls, seed {args.seed}, {args.minutes:g} min: {dict(counts)} ({len(kinds)} kinds of failure)")
+    for kind, n in sorted(kinds.items(), key=lambda item: -item[1]):
+        print(f"{n:6d}  {kind}")
+    return 1 if kinds else 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=10)
@@ -54,8 +98,13 @@ def main(argv=None) -> int:
                         help="build and render every N-th case that checks (0: never)")
     parser.add_argument("--out", type=Path, default=Path("fuzz-failures"))
     parser.add_argument("--case", type=int, help="replay this one case and stop")
+    parser.add_argument("--calls", action="store_true", help="command lines and API calls instead of scenes")
+    parser.add_argument("--headroom", type=int, default=fuzz_calls.HEADROOM_BYTES // 2 ** 20, metavar="MIB",
+                        help="with --calls: address space a case may add to the server's (MiB)")
     args = parser.parse_args(argv)
     warnings.simplefilter("ignore")     # the OpenCL compiler's chatter
+    if args.calls:
+        return run_calls(args)
     if args.case is not None:
         replay(args.seed, args.case, build=args.build_every != 0)
         return 0

@@ -14,6 +14,7 @@ import dataclasses
 import hashlib
 import json
 import os
+import re
 import sys
 
 import numpy as np
@@ -25,9 +26,39 @@ from .paths import camera_at, frame_times, params_at
 from .write import DEFAULT_TONE_CURVE, linear_to_srgb, replacing, tone_mapped
 
 
+FRAME_EXTENSIONS = (".exr", ".png")
+# printf's conversions of a whole number, with flags and a width: %d, %04d, %-6i, %u
+_FRAME_NUMBER = re.compile(r"%[-+ #0]*\d*[diu]")
+
+
+def check_pattern(pattern) -> str:
+    """`pattern`, the frames' file names with the frame number (e.g.
+    `frames/frame_%04d.png`), checked whole before any frame is rendered:
+    one whole-number conversion (%d, %04d, %i or %u; `%%` for a percent
+    sign), in the file's name (frames share one folder), and an .exr or
+    .png name without control characters; ValueError saying what is wrong."""
+    from .arguments import require_type
+    require_type("the frames' pattern", pattern, (str, os.PathLike), "a file name with %d, e.g. frames/f_%04d.png")
+    pattern = os.fspath(pattern)
+    example = "e.g. frames/frame_%04d.png"
+    numbers = list(_FRAME_NUMBER.finditer(pattern))
+    others = re.sub("%%", "", _FRAME_NUMBER.sub("", pattern))
+    if len(numbers) != 1 or "%" in others:
+        raise ValueError(f"{pattern}: the name must hold the frame number once, as %d or %04d (%% for a "
+                         f"percent sign), {example}")
+    folder_end = max(pattern.rfind("/"), pattern.rfind(os.sep))
+    if numbers[0].start() < folder_end:
+        raise ValueError(f"{pattern}: the frame number goes in the file's name, not a folder's, {example}")
+    first = pattern % 0
+    if any(ord(c) < 32 or ord(c) == 127 for c in first):
+        raise ValueError(f"{pattern!r}: a control character in the name")
+    if not first.lower().endswith(FRAME_EXTENSIONS):
+        raise ValueError(f"{pattern}: frames must be {' or '.join(FRAME_EXTENSIONS)}")
+    return pattern
+
+
 def frame_file(pattern: str, index: int) -> str:
-    """The file of frame `index`: `pattern` holds a printf number, e.g.
-    `frames/frame_%04d.png`."""
+    """The file of frame `index`: `pattern` holds a printf number (check_pattern)."""
     return pattern % index
 
 
@@ -90,18 +121,40 @@ def parse_frame_range(text: str) -> tuple[int, int | None]:
     return int(first), int(last) if last else None
 
 
+def _frame_range(frames) -> tuple[int, int | None]:
+    """`frames` (first, last or None: to the end), checked; all frames for None."""
+    if frames is None:
+        return 0, None
+    from .arguments import require_type
+    takes = "a pair (first, last) of frame numbers from 0, last None for the end"
+    require_type("frames", frames, (tuple, list), takes)
+    if len(frames) != 2:
+        raise ValueError(f"frames must be {takes}, not {frames!r}")
+    first, last = frames
+    require_type("frames' first", first, int, "a frame number from 0")
+    if last is not None:
+        require_type("frames' last", last, int, "a frame number from 0, or None for the end")
+    if first < 0 or (last is not None and last < first):
+        raise ValueError(f"frames must be {takes}, first at most last, not {frames!r}")
+    return first, last
+
+
 def plan_frames(scene: Scene, pattern: str, fps: float, seed: int, overwrite: bool, render_keys: dict,
                 frames: tuple[int, int | None] | None = None) -> FramePlan:
     """The frames of the scene's path and which of them are not on disk yet
     from the same scene text and settings (all of them with `overwrite`),
     among `frames` (first, last or None: the end) if given, so that
     machines can share an animation; makes the frames' folder."""
+    from .arguments import checked, require_type
+    pattern = check_pattern(pattern)
+    require_type("seed", seed, int, "a whole number")
+    seed = checked("seed", seed)
     path = scene.checked.path
     if path is None:
         raise ValueError(f"{scene.checked.file} has no 'path' to animate")
     times = frame_times(path, fps)
     files = [frame_file(pattern, i) for i in range(len(times))]
-    first, last = frames or (0, None)
+    first, last = _frame_range(frames)
     if first >= len(times):
         raise ValueError(f"--frames {first}-{'' if last is None else last}: the path has {len(times)} frames "
                          f"at {fps:g} fps, 0 to {len(times) - 1}")

@@ -11,11 +11,13 @@ from __future__ import annotations
 import hashlib
 import os
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
 from . import __version__, pathtrace, program, run
+from .arguments import checked, require_type
 from .build import build
 from .devices import open_device
 from .denoise import denoise_image, require_denoiser
@@ -24,15 +26,17 @@ from .emit import Target, emit, uniform_source
 from .errors import RenderError, SceneError, diagnostic
 from .lanes import CHOICES as LANE_CHOICES
 from .lower import lower
+from .memory import require_memory
 from .parse import parse
 from .passes import PASSES, channels
 from .program import Camera, CheckedScene, RenderSettings
 from .source import read_scene_file
-from .write import write
+from .write import COMPRESSIONS, write
 
 PRECISIONS = ("float", "double")
 # change without rebuilding (exposure and tonemap: only PNG writing reads them)
 _RUNTIME_KEYS = {"width", "height", "samples", "exposure", "tonemap"}
+CAMERA_BASE = program.Camera    # a file's camera and a fractalc.Camera made from Python alike
 SCENE_TEXT_LIMIT = 64 * 1024   # longer scene text is left out of the metadata (its sha256 and path stay)
 
 
@@ -58,10 +62,13 @@ class Image:
                 planes.update({c: self.passes[name][..., i] for i, c in enumerate(names)})
         return planes
 
-    def save(self, path: str, half: bool = False, compression: str = "zip", bits: int = 8) -> None:
+    def save(self, path: str | os.PathLike, half: bool = False, compression: str = "zip", bits: int = 8) -> None:
         """Write EXR (linear, all channels, camera matrices, metadata; `half`
         floats, `compression`) or PNG (sRGB, `bits` 8 or 16, straight alpha)."""
-        write(path, self.planes(), self.metadata, half=half, compression=compression, bits=bits)
+        require_type("path", path, (str, os.PathLike), "a file name (str or pathlib.Path)")
+        require_type("compression", compression, str, f"a compression's name ({', '.join(COMPRESSIONS)})")
+        require_type("bits", bits, int, "8 or 16")
+        write(os.fspath(path), self.planes(), self.metadata, half=bool(half), compression=compression, bits=bits)
 
     def __repr__(self) -> str:
         height, width = self.depth.shape
@@ -98,7 +105,7 @@ class Camera(program.Camera):
         from .check import CAMERA_KEYS
         for key, parameter in CAMERA_KEYS.items():
             value = getattr(self, key)
-            if value is None:      # focus: on the target
+            if value is None and key == "focus":      # on the target
                 continue
             try:
                 value = check_value(parameter, key, value)
@@ -118,18 +125,23 @@ class Scene:
     """A checked scene, ready to compile and render."""
 
     def __init__(self, checked: CheckedScene, params: dict | None = None,
-                 precision: str | None = None, device: str | None = None, lanes: int | None = None):
+                 precision: str | None = None, device: str | int | None = None, lanes: int | None = None):
+        if precision is not None:
+            require_type("precision", precision, str, "'float' or 'double'")
         precision = precision or checked.render.precision
         if precision not in PRECISIONS:
             raise ValueError(f"precision must be 'float' or 'double', not {precision!r}")
-        if lanes is not None and lanes not in LANE_CHOICES:
-            raise ValueError(f"lanes must be one of {', '.join(map(str, LANE_CHOICES))}, not {lanes!r}")
+        _check_lanes(lanes)
+        if device is not None:
+            require_type("device", device, (str, int), "a device's index (0, 1, ...) or a name ('cpu', 'gpu')")
+            if isinstance(device, int) and device < 0:
+                raise ValueError(f"device must be an index from 0 (see 'fractalc devices'), not {device}")
         self.lanes = lanes      # rays per work-item; None: the device's (fractalc/lanes.py)
         self.checked = replace(checked, render=replace(checked.render, precision=precision))
-        self.device_spec = device
+        self.device_spec = None if device is None else str(device)
         self._programs: dict = {}    # (compiled settings, lens, target) -> built program
         self.params = {p.name: p.default for p in checked.params}
-        self.set_params(params or {})
+        self.set_params({} if params is None else params)
 
     def __repr__(self) -> str:
         params = ", ".join(f"{k}={v:g}" for k, v in self.params.items()) or "none"
@@ -141,16 +153,23 @@ class Scene:
     def set_params(self, values: dict) -> None:
         """Change param values (no rebuild); each must lie in its range, and
         so must every value computed from them. On an error nothing changes."""
+        require_type("params", values, Mapping, "a dict of param name -> number")
         declared = {p.name: p for p in self.checked.params}
         changed = dict(self.params)
         for name, value in values.items():
+            require_type("a param's name", name, str, "a str")
             info = declared.get(name)
             if info is None:     # the caller's mistake, not the file's
                 raise ValueError(unknown_param(name, self.checked))
             try:
+                if isinstance(value, (str, bytes, bool)):
+                    raise TypeError
                 value = float(value)
             except (TypeError, ValueError):
-                raise ValueError(f"param '{name}' must be a number, not {value!r}") from None
+                raise TypeError(f"param '{name}' must be a number, not {value!r}") from None
+            except OverflowError:       # an int beyond float's range: 10**400
+                raise ValueError(f"param '{name}' must be a finite number within ±{FLOAT_MAX:.3g}, "
+                                 f"not a whole number of {len(str(abs(value)))} digits") from None
             if not in_float_range(value):   # NaN would pass any range check
                 raise ValueError(f"param '{name}' must be a finite number within ±{FLOAT_MAX:.3g}, not {value!r}")
             if (info.low is not None and value < info.low) or (info.high is not None and value > info.high):
@@ -200,6 +219,7 @@ class Scene:
 
     def kernel_source(self, lanes: int | None = None, **render_keys) -> str:
         """The standalone OpenCL C source (no includes) for this scene."""
+        _check_lanes(lanes)
         settings = self._settings(render_keys)
         scene = replace(self.checked, render=settings)
         return emit(lower(scene), self._target(settings, lanes))
@@ -226,6 +246,8 @@ class Scene:
     def set_defaults(self, camera: Camera | None = None, **render_keys) -> None:
         """Replace the file's camera and render settings (any render key,
         checked as `render` checks it) for every later render."""
+        if camera is not None:
+            require_type("camera", camera, CAMERA_BASE, "a fractalc.Camera")
         self.checked = replace(self.checked, render=self._settings(render_keys),
                                camera=camera or self.checked.camera)
 
@@ -238,6 +260,7 @@ class Scene:
             if value is None:
                 continue
             if key == "environment_map":    # not a file's key: an image file, the sky
+                require_type("environment_map", value, (str, os.PathLike), "an image file's name")
                 path = os.path.abspath(os.fspath(value))
                 pathtrace.environment_map(path)      # a ValueError where it cannot be read
                 settings = replace(settings, environment_map=path)
@@ -245,6 +268,10 @@ class Scene:
             if key == "aovs":    # not a file's key: passes to add to the default channels
                 if isinstance(value, str):
                     raise ValueError(f"aovs must be a list of pass names, not the string {value!r}")
+                require_type("aovs", value, (list, tuple, set, frozenset),
+                             f"a list of pass names ({', '.join(PASSES)})")
+                for name in value:
+                    require_type("a pass in aovs", name, str, f"a pass name ({', '.join(PASSES)})")
                 channels(value)     # raises ValueError naming an unknown pass
                 settings = replace(settings, aovs=tuple(p for p in PASSES if p in value))
                 continue
@@ -268,6 +295,16 @@ class Scene:
 
     def distance(self, points) -> np.ndarray:
         """Distance estimates at (N, 3) points, computed by the compiled kernel."""
+        if isinstance(points, (str, bytes)) or points is None:
+            raise TypeError(f"points must be an (N, 3) array of numbers, not {points!r}")
+        try:
+            points = np.asarray(points, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            raise TypeError("points must be an (N, 3) array of numbers") from None
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise ValueError(f"points must have shape (N, 3), not {points.shape}")
+        if not np.isfinite(points).all():
+            raise ValueError("points must be finite (no NaN or infinity)")
         program, target = self._program(self.checked.render)
         return run.distances(program, self.device, points, self._param_values(),
                              target.lanes, target.double)
@@ -308,13 +345,18 @@ class Scene:
             require_denoiser()
             aovs = tuple(render_keys.pop("aovs", None) or ()) + ("albedo",)
             return denoise_image(self.render(seed, progress, camera, cluster, aovs=aovs, **render_keys))
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2 ** 32:
-            raise ValueError(f"seed must be a whole number from 0 to {2 ** 32 - 1}, not {seed!r}")
+        require_type("seed", seed, (int, np.integer), "a whole number")
+        seed = checked("seed", seed)
+        if camera is not None:
+            require_type("camera", camera, CAMERA_BASE, "a fractalc.Camera")
         if cluster is not None:
+            if not all(hasattr(cluster, name) for name in ("submit", "nthreads")):
+                raise TypeError(f"cluster must be a Dask client (distributed.Client), not {cluster!r:.60}")
             from .cluster import render_still
             return render_still(self, cluster, seed, camera, progress, **render_keys)
         settings = self._settings(render_keys)
         names = channels(settings.aovs)
+        require_image_memory(settings.width, settings.height, len(names), settings.integrator == "path")
         camera = camera or self.checked.camera
         program, target = self._program(settings, camera)
         frame = run.Frame(settings.width, settings.height, settings.samples, seed,
@@ -370,15 +412,41 @@ class Scene:
         return metadata
 
 
+def _check_lanes(lanes) -> None:
+    if lanes is not None:
+        require_type("lanes", lanes, int, f"one of {', '.join(map(str, LANE_CHOICES))}")
+        if lanes not in LANE_CHOICES:
+            raise ValueError(f"lanes must be one of {', '.join(map(str, LANE_CHOICES))}, not {lanes!r}")
+
+
+# Bytes a pixel takes while rendering, beyond its channels' float32s: the
+# path tracer's double sums of colour and coverage, and a pass beside the first
+PATH_TRACED_PIXEL_BYTES = 4 * 8
+
+
+def require_image_memory(width: int, height: int, channel_count: int, path_traced: bool) -> None:
+    """Refuse an image that the machine's memory cannot hold (RenderError
+    naming its width and height), before any work: its float32 channels,
+    twice and its double sums where path-traced (fractalc.pathtrace)."""
+    pixel = 4 * channel_count * (2 if path_traced else 1) + (PATH_TRACED_PIXEL_BYTES if path_traced else 0)
+    require_memory(width * height * pixel, f"an image of width {width} and height {height} ({channel_count} channels)")
+
+
 def loads(text: str, params: dict | None = None, precision: str | None = None,
-          device: str | None = None, path: str = "<string>", lanes: int | None = None) -> Scene:
+          device: str | int | None = None, path: str = "<string>", lanes: int | None = None) -> Scene:
     """Parse and check scene text; raise SceneError on any mistake in it.
-    `lanes` (1, 2, 4, 8, 16) overrides the rays per work-item."""
-    return Scene(check(parse(text, path)), params, precision, device, lanes)
+    `device`: an index or a name, as --device takes; `lanes` (1, 2, 4, 8,
+    16) overrides the rays per work-item."""
+    require_type("text", text, str, "the scene's text as a str (load() reads a file)")
+    require_type("path", path, (str, os.PathLike), "the file name to show in messages")
+    if params is not None:
+        require_type("params", params, Mapping, "a dict of param name -> number")
+    return Scene(check(parse(text, os.fspath(path))), params, precision, device, lanes)
 
 
 def load(path: str | os.PathLike, params: dict | None = None, precision: str | None = None,
-         device: str | None = None, lanes: int | None = None) -> Scene:
+         device: str | int | None = None, lanes: int | None = None) -> Scene:
     """Read, parse and check a .frac file (see `source.read_scene_file`)."""
+    require_type("path", path, (str, os.PathLike), "a .frac file's name (str or pathlib.Path)")
     path = os.fspath(path)
     return loads(read_scene_file(path), params, precision, device, path, lanes)

@@ -46,6 +46,12 @@ _ERROR = Value("error", None)
 # 11 s to build and render once, 2000 spheres 30 s, 4000 spheres 73 s
 # (benchmarks/scene_size.py; 10000 spheres took 17 minutes).
 MAX_SHAPES = 6000
+# Formula steps in one round of a hybrid (each `f() * n` counts n): a round
+# is written out whole in the orbit loop, so the kernel grows with it. On 2
+# cores (load 5), hybrids of bulb and amazing_box steps, iterations 1000,
+# check in 0.3-1.7 s and then build and render once in 7 s (100 steps),
+# 26 s (200), 64 s (400; benchmarks/hybrid_size.py); 1000 steps built for 84 s.
+MAX_HYBRID_STEPS = 256
 # The hit threshold's largest multiple: normals are differences over that
 # step, which beyond it can pass float's range on the scene (NaN normals).
 MAX_EPSILON_SCALE = 1000
@@ -264,6 +270,7 @@ class _Checker:
                 self.fail(arg.span, f"'hybrid' takes formulas (e.g. hybrid(bulb(8) * 2, amazing_box())), "
                                     f"this is {_TYPE_WORDS[value.type]}")
             sequence.extend(value.data)
+            self.require_hybrid_steps(sequence, arg.span)
         if not sequence:
             self.fail(e.span, "'hybrid' needs at least one formula")
         sizes = {}                     # 3 or 4 -> the first formula whose z has that many components
@@ -290,7 +297,17 @@ class _Checker:
         n = count.data.value if ir.is_const(count.data) else None
         if n is None or n != math.floor(n) or not 1 <= n <= 100:
             self.fail(e.right.span, "a formula's repeat count must be a constant whole number from 1 to 100")
-        return Value(FORMULA, tuple(replace(use, count=use.count * int(n)) for use in formula.data))
+        repeated = tuple(replace(use, count=use.count * int(n)) for use in formula.data)
+        self.require_hybrid_steps(repeated, e.right.span)
+        return Value(FORMULA, repeated)
+
+    def require_hybrid_steps(self, sequence, span: Span) -> None:
+        """A hybrid's round of at most MAX_HYBRID_STEPS steps, refused where it passes them."""
+        steps = sum(use.count for use in sequence)
+        if steps > MAX_HYBRID_STEPS:
+            self.fail(span, f"the hybrid passes {MAX_HYBRID_STEPS} formula steps per round here ({steps}): "
+                            f"each is written out in the kernel, which would take minutes to compile. "
+                            f"Use fewer steps (a formula's repeat count, e.g. 'bulb() * 4', counts as 4)")
 
     def fractal(self, e: ast.Call) -> Value:
         bound = self.bind(e, FORMULA_FORMS["fractal"], e.args)
@@ -576,22 +593,25 @@ class _Checker:
         return data
 
     def check_constraints(self, span: Span, data, param: Parameter, owner: str,
-                          others: dict | None = None) -> None:
+                          others: dict | None = None, subject: str | None = None) -> None:
+        """`subject`: who the message speaks of, if not `'name' of 'owner'`
+        (an API argument; '': none, where the caller names the option)."""
+        subject = f"'{param.name}' of '{owner}'" if subject is None else subject
         items = data.items if isinstance(data, ir.Vec) else (data,)
         if not all(isinstance(x, ir.Const) for x in items):
             if (param.constraints or param.type == "int") and others is None:
                 self.param_checks.append(ParamCheck(span, data, param, owner))
             return   # depends on a param: checked for each set of param values
         values = [x.value for x in items]
-        shown = f"{values[0]:g}" if len(values) == 1 else "(" + ", ".join(f"{v:g}" for v in values) + ")"
+        shown = _number_text(values[0]) if len(values) == 1 else "(" + ", ".join(f"{v:g}" for v in values) + ")"
         if param.type == "int" and any(v != math.floor(v) for v in values):
-            self.fail(span, f"'{param.name}' of '{owner}' must be a whole number, not {shown}")
+            self.fail(span, f"{subject} must be a whole number, not {shown}".lstrip())
         for c in param.constraints:
             if c == "nonzero":
                 ok, says = any(v != 0 for v in values), "must not be zero"
             elif ".." in c:
                 lo, hi = (float(x) for x in c.split(".."))
-                ok, says = all(lo <= v <= hi for v in values), f"must be between {lo:g} and {hi:g}"
+                ok, says = all(lo <= v <= hi for v in values), f"must be between {_number_text(lo)} and {_number_text(hi)}"
             else:
                 opname, bound = c[:2] if c[1] == "=" else c[0], c[2:] if c[1] == "=" else c[1:]
                 if bound[0].isalpha():
@@ -599,12 +619,12 @@ class _Checker:
                         continue
                     limit, bound_text = others[bound], f"'{bound}' ({others[bound]:g})"
                 else:
-                    limit, bound_text = float(bound), bound
+                    limit, bound_text = float(bound), _number_text(float(bound))
                 test = {">": float.__gt__, ">=": float.__ge__, "<": float.__lt__, "<=": float.__le__}[opname]
                 ok = all(test(v, limit) for v in values)
                 says = f"must be {'greater than' if opname == '>' else 'at least' if opname == '>=' else 'less than' if opname == '<' else 'at most'} {bound_text}"
             if not ok:
-                self.fail(span, f"'{param.name}' of '{owner}' {says}, not {shown}")
+                self.fail(span, f"{subject} {says}, not {shown}".lstrip())
 
     def bound_args(self, e, signature: Signature, args) -> tuple:
         bound = self.bind(e, signature, args)
@@ -1196,10 +1216,21 @@ def check(program: ast.Program) -> CheckedScene:
     return _Checker(program).run()
 
 
-def check_value(param: Parameter, key: str, value):
+def _number_text(number: float) -> str:
+    """A number in a message: whole numbers in full (4294967295, not 4.29497e+09)."""
+    return str(int(number)) if number.is_integer() and abs(number) < 1e16 else f"{number:g}"
+
+
+def check_value(param: Parameter, key: str, value, subject: str | None = None):
     """Validate a render setting given from Python or the command line
-    (type and range, as in a file); raise ValueError saying what is wrong."""
+    (type and range, as in a file); raise ValueError saying what is wrong,
+    of `subject` (default: `'key' of 'render'`; '': none). A number is a
+    Python or numpy number, never a string or a bool."""
     checker = _Checker(ast.Program((), "<arguments>", ""))
+    named = repr(key) if subject is None else subject
+
+    def wrong(says: str) -> ValueError:
+        return ValueError(f"{named} {says}".lstrip())
     if param.type == "file":
         if value is not None:
             raise ValueError(f"'{key}' is a scene file's key: from Python give environment_map=FILE "
@@ -1212,31 +1243,33 @@ def check_value(param: Parameter, key: str, value):
         if isinstance(value, type(defaults)):
             value = {f: getattr(value, f) for f in keys}
         if not isinstance(value, dict):
-            raise ValueError(f"'{key}' must be a dict of {', '.join(keys)} (or False for off)")
+            raise wrong(f"must be a dict of {', '.join(keys)} (or False for off)")
         unknown = set(value) - set(keys)
         if unknown:
-            raise ValueError(f"'{key}' has no key '{sorted(unknown)[0]}' (known: {', '.join(keys)})")
+            raise wrong(f"has no key '{sorted(unknown)[0]}' (known: {', '.join(keys)})")
         return replace(defaults, **{k: check_value(keys[k], f"{key}.{k}", v) for k, v in value.items()})
     choices = param.type[5:].split("|") if param.type.startswith("word:") else ()
-    if value in choices:
+    if isinstance(value, str) and value in choices:
         return value
     other = _word_alternative(choices) if choices else param.type
     if other is None:
-        raise ValueError(f"'{key}' must be {' or '.join(repr(c) for c in choices)}, not {value!r}")
+        raise wrong(f"must be {' or '.join(repr(c) for c in choices)}, not {value!r}")
     is_vector = other == "vec3"
     try:
-        items = tuple(float(x) for x in value) if is_vector else (float(value),)
-    except (TypeError, ValueError):
-        raise ValueError(f"'{key}' must be {_TYPE_WORDS['vec3' if is_vector else NUM]}, "
-                         f"not {value!r}") from None
+        numbers = tuple(value) if is_vector else (value,)
+        if any(isinstance(x, (str, bytes, bool)) for x in numbers):
+            raise TypeError
+        items = tuple(float(x) for x in numbers)
+    except (TypeError, ValueError, OverflowError):
+        raise wrong(f"must be {_TYPE_WORDS['vec3' if is_vector else NUM]}, not {value!r}") from None
     if is_vector and len(items) != 3:
-        raise ValueError(f"'{key}' must have 3 components, not {len(items)}")
+        raise wrong(f"must have 3 components, not {len(items)}")
     if not all(in_float_range(x) for x in items):
-        raise ValueError(f"'{key}' must be finite (within ±{FLOAT_MAX:.3g}), not {value!r}")
+        raise wrong(f"must be finite (within ±{FLOAT_MAX:.3g}), not {value!r}")
     data = ir.Vec(tuple(ir.const(x) for x in items)) if is_vector else ir.const(items[0])
     numeric = param if not choices else _P(param.name, other, None, *param.constraints)
     try:
-        checker.check_constraints(Span(1, 1, 1, 2), data, numeric, "render")
+        checker.check_constraints(Span(1, 1, 1, 2), data, numeric, "render", subject=subject)
     except _Failed:
         raise ValueError(checker.errors[0].message) from None
     if is_vector:

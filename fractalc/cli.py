@@ -27,6 +27,7 @@ class UsageError(Exception):
 
 
 def _parse_set(values: list[str]) -> dict[str, float]:
+    from .arguments import parse_number
     params = {}
     for item in values or ():
         name, sep, value = item.partition("=")
@@ -34,20 +35,29 @@ def _parse_set(values: list[str]) -> dict[str, float]:
             raise UsageError(f"--set takes NAME=VALUE, not '{item}'")
         from .check import in_float_range
         try:
-            number = float(value)
-        except ValueError:
-            raise UsageError(f"--set {name.strip()}: '{value}' is not a number") from None
+            number = parse_number(value)
+        except ValueError as error:
+            raise UsageError(f"--set {name.strip()}: {error}") from None
         if not in_float_range(number):
             raise UsageError(f"--set {name.strip()}: '{value}' is not a finite number within float's range")
         params[name.strip()] = number
     return params
 
 
-def _seed(text: str) -> int:
-    """--seed: the kernel's jitter seed is a 32-bit unsigned integer."""
-    if not (text.isascii() and text.isdigit()) or int(text) >= 2 ** 32:
-        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number from 0 to {2 ** 32 - 1}")
-    return int(text)
+def _option(name: str):
+    """The argparse type of a numeric option: its text read by
+    arguments.parse_number and checked against the argument `name`'s
+    range (arguments.ARGUMENTS, or a render key's), as the API checks it.
+    Tests find every numeric option by the function's `argument`."""
+    from .arguments import checked, parse_number
+
+    def parse(text: str):
+        try:
+            return checked(name, parse_number(text), subject="")
+        except ValueError as error:
+            raise argparse.ArgumentTypeError(str(error)) from None
+    parse.argument = name
+    return parse
 
 
 def _device(text: str) -> str:
@@ -82,9 +92,10 @@ def _passes(text: str) -> list[str]:
 
 def _key_value(text: str):
     """A --render or --camera value: numbers, a vector (x,y,z), or a word."""
+    from .arguments import parse_number
     parts = [part.strip() for part in text.strip().strip("()").split(",")]
     try:
-        numbers = tuple(float(part) for part in parts)
+        numbers = tuple(parse_number(part) for part in parts)
     except ValueError:
         return text.strip()
     return numbers if len(numbers) > 1 else numbers[0]
@@ -186,11 +197,16 @@ def _cluster(args):
     entering), else one that gives None."""
     if args.workers is None and args.cluster is None:
         return nullcontext()
-    from .cluster import MISSING_EXTRA, connect, installed
+    from .cluster import MISSING_EXTRA, connect, installed, require_workers_memory, scheduler_address
     if not installed():
         raise UsageError(MISSING_EXTRA)
-    if args.workers is not None and args.workers < 1:
-        raise UsageError(f"--workers {args.workers}: must be at least 1")
+    if args.cluster is not None:
+        try:
+            scheduler_address(args.cluster)
+        except ValueError as error:
+            raise UsageError(f"--cluster {args.cluster}: {error}") from None
+    else:
+        require_workers_memory(args.workers)
     return connect(args.workers, args.cluster)
 
 
@@ -207,6 +223,12 @@ def command_render(args) -> int:
     if args.bits != 8 and exr:
         raise UsageError(f"--bits is for PNG (and other integer) output, not {args.output}")
     _require_writable(("-o", args.output, args.output))
+    if args.environment_map is not None:
+        from .pathtrace import environment_map
+        try:
+            environment_map(os.path.abspath(args.environment_map))
+        except ValueError as error:
+            raise UsageError(f"--environment-map {args.environment_map}: {error}") from None
     scene = _load(args)
     overrides = {"width": args.width, "height": args.height, "samples": args.samples, "aovs": args.aov}
     try:
@@ -285,9 +307,6 @@ def command_check(args) -> int:
         print(line)
         return 0
     from .overstep import Against, has_escape_time_set, measure
-    _require_positive(("--rays", args.rays))
-    if not 0 < args.surface < 1:
-        raise UsageError("--surface must be between 0 and 1 (bound radii)")
     scene = _load(args)
     # against the estimate's own surface, then (fractals with a bailout) the escape-time set
     for against in (Against.ESTIMATE, Against.ESCAPE_TIME_SET)[:1 + has_escape_time_set(scene)]:
@@ -339,10 +358,6 @@ def command_bench(args) -> int:
         if key not in RESOLUTIONS:
             raise UsageError(f"--resolution {args.resolution}: choose one of {', '.join(RESOLUTIONS)}")
         width, height = RESOLUTIONS[key]
-    for name, value in (("--frames", args.frames), ("--repeat", args.repeat), ("--width", width),
-                        ("--height", height)):
-        if value is not None and value < 1:
-            raise UsageError(f"{name} must be at least 1")
     _require_writable(*((name, path, path) for name, path in
                         (("--json", args.json), ("--csv", args.csv), ("--plot", args.plot))))
     if args.count:
@@ -391,16 +406,7 @@ def command_bench(args) -> int:
     return 0
 
 
-def _require_positive(*options) -> None:
-    for name, value in options:
-        if value is not None and value < 1:
-            raise UsageError(f"{name} must be at least 1")
-
-
 def command_view(args) -> int:
-    _require_positive(("--width", args.width), ("--height", args.height),
-                      ("--preview-scale", args.preview_scale), ("--max-samples", args.max_samples),
-                      ("--benchmark", args.benchmark))
     text = _require_file(args.scene)
     keys = _keys_given(args)
     if args.set:        # each a param of the file's, before a window opens
@@ -425,18 +431,18 @@ def command_view(args) -> int:
 
 
 def _size(text: str) -> tuple[int, int]:
-    """WIDTHxHEIGHT, each from 1 to 65536."""
+    """WIDTHxHEIGHT, each in the range of a render's width and height."""
+    from .arguments import checked
     width, x, height = text.lower().partition("x")
-    if not (x and width.isascii() and width.isdigit() and height.isascii() and height.isdigit()) \
-            or not (1 <= int(width) <= 65536 and 1 <= int(height) <= 65536):
+    if not (x and width.isascii() and width.isdigit() and height.isascii() and height.isdigit()):
         raise argparse.ArgumentTypeError(f"'{text}' is not a size WIDTHxHEIGHT such as 320x180")
-    return int(width), int(height)
+    try:
+        return checked("width", int(width)), checked("height", int(height))
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(f"'{text}': {error}") from None
 
 
 def command_studio(args) -> int:
-    _require_positive(("--preview-scale", args.preview_scale), ("--max-samples", args.max_samples))
-    if args.port is not None and not 0 <= args.port <= 65535:
-        raise UsageError(f"--port {args.port}: must be from 0 to 65535")
     _require_file(args.scene)
     from .studio import MISSING_EXTRA, installed
     if not installed():
@@ -459,14 +465,12 @@ def _frame_range(text: str) -> tuple[int, int | None]:
 
 def command_animate(args) -> int:
     cluster = _cluster(args)
+    from .animate import check_pattern, frame_file
     try:
-        first, second = args.output % 0, args.output % 1
-    except (TypeError, ValueError):
-        first = second = None
-    if first is None or first == second:
-        raise UsageError(f"-o {args.output}: the name must hold the frame number, e.g. frames/frame_%04d.png")
-    if not first.lower().endswith((".exr", ".png")):
-        raise UsageError(f"-o {args.output}: frames must be .exr or .png")
+        check_pattern(args.output)
+    except ValueError as error:
+        raise UsageError(f"-o {error}") from None
+    first = frame_file(args.output, 0)
     if args.aov and not first.lower().endswith(".exr"):
         raise UsageError(f"--aov is for EXR frames, not {args.output}{_AOV_IN_EXR}")
     if args.mp4 and not args.mp4.lower().endswith(".mp4"):
@@ -474,9 +478,6 @@ def command_animate(args) -> int:
     if args.mp4 and args.frames:
         raise UsageError("--mp4 needs every frame: render the ranges with --frames, then run again without "
                          "--frames to encode them (frames on disk are kept)")
-    if not args.fps > 0:
-        raise UsageError("--fps must be greater than 0")
-    _require_positive(("--width", args.width), ("--height", args.height), ("--samples", args.samples))
     _require_writable(("-o", args.output, first), folders_made=True)
     _require_writable(("--mp4", args.mp4, args.mp4))
     from .animate import render_frames, require_mp4_writer, write_mp4
@@ -505,16 +506,21 @@ def command_animate(args) -> int:
 
 
 def _bounds(text: str) -> tuple[float, ...]:
-    """--bounds: XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX, each minimum below its maximum."""
-    from .check import in_float_range
+    """--bounds: six numbers XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX, checked as
+    mesh.check_bounds checks them at the finest resolution and precision
+    (again with the command's resolution and precision once they are known)."""
+    from .arguments import MAX_RESOLUTION, parse_number
+    from .mesh import check_bounds
     try:
-        values = tuple(float(x) for x in text.split(","))
+        values = tuple(parse_number(x) for x in text.split(","))
     except ValueError:
         values = ()
-    if len(values) != 6 or not all(in_float_range(v) for v in values):
+    if len(values) != 6:
         raise argparse.ArgumentTypeError(f"'{text}' is not six numbers XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX")
-    if not all(low < high for low, high in zip(values[:3], values[3:])):
-        raise argparse.ArgumentTypeError(f"'{text}': each minimum must be less than its maximum")
+    try:
+        check_bounds(values, MAX_RESOLUTION, True, f"'{text}'")
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
     return values
 
 
@@ -525,22 +531,18 @@ def command_mesh(args) -> int:
     shells = Shells(args.shells) if args.shells else Shells.default_for(args.output)
     if args.min_volume is not None and shells is not Shells.SOLID:
         raise UsageError("--min-volume is for --shells solid (the default for .stl): it chooses the bodies kept")
-    if args.min_volume is not None and not args.min_volume > 0:
-        raise UsageError(f"--min-volume {args.min_volume:g}: must be greater than 0")
-    if not 2 <= args.resolution <= 16384:
-        raise UsageError("--resolution must be from 2 to 16384")
     try:
         require_scikit_image()
     except ImportError as error:
         raise UsageError(str(error)) from None
     _require_writable(("-o", args.output, args.output))
     scene = _load(args)
-    if args.bounds is None:
-        from .mesh import bounds_of
-        try:
-            bounds_of(scene)
-        except ValueError as error:
-            raise UsageError(f"{error} with --bounds=XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX") from None
+    from .mesh import bounds_of
+    try:
+        bounds_of(scene, args.bounds, args.resolution, "--bounds")
+    except ValueError as error:
+        raise UsageError(str(error) if args.bounds else
+                         f"{error} with --bounds=XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX") from None
     start = time.perf_counter()
     try:
         mesh = scene.mesh(resolution=args.resolution, bounds=args.bounds, progress=not args.quiet)
@@ -588,16 +590,16 @@ def _parser() -> argparse.ArgumentParser:
         key_options(p)
         p.add_argument("--preset", metavar="NAME", help="the param values of the file's 'preset NAME' "
                                                        "(--set still wins)")
-        p.add_argument("--width", type=int)
-        p.add_argument("--height", type=int)
-        p.add_argument("--samples", type=int, help="anti-aliasing samples per pixel")
-        p.add_argument("--seed", type=_seed, default=0, help="jitter seed for samples > 1")
+        p.add_argument("--width", type=_option("width"))
+        p.add_argument("--height", type=_option("height"))
+        p.add_argument("--samples", type=_option("samples"), help="anti-aliasing samples per pixel")
+        p.add_argument("--seed", type=_option("seed"), default=0, help="jitter seed for samples > 1")
         p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
         p.add_argument("--aov", type=_passes, action="extend", metavar="PASS[,PASS...]",
                        help=f"add passes to the EXR (repeatable; EXR output only): {', '.join(PASSES)} "
                             "(see docs/compositing.md)")
         farm = p.add_mutually_exclusive_group()
-        farm.add_argument("--workers", type=int, metavar="N",
+        farm.add_argument("--workers", type=_option("workers"), metavar="N",
                           help="render on a local Dask cluster of N processes (the 'cluster' extra; "
                                "see docs/cluster.md)")
         farm.add_argument("--cluster", metavar="ADDRESS",
@@ -617,7 +619,8 @@ def _parser() -> argparse.ArgumentParser:
     render.add_argument("-o", "--output", required=True, help="output image (.exr, .png, ...)")
     render.add_argument("--half", action="store_true", help="EXR: half-float channels (Z and P stay float)")
     render.add_argument("--compression", choices=COMPRESSIONS, help="EXR compression (default zip)")
-    render.add_argument("--bits", type=int, choices=(8, 16), default=8, help="PNG: bits per channel (default 8)")
+    render.add_argument("--bits", type=_option("bits"), choices=(8, 16), default=8,
+                        help="PNG: bits per channel (default 8)")
     image_options(render)
     render.set_defaults(run=command_render)
 
@@ -637,9 +640,9 @@ def _parser() -> argparse.ArgumentParser:
     check_.add_argument("scene")
     check_.add_argument("--de", action="store_true",
                         help="measure the distance estimate against the surface found by fine marching")
-    check_.add_argument("--rays", type=int, default=400, help="with --de: seeded rays (default 400)")
-    check_.add_argument("--seed", type=int, default=0, help="with --de: the rays' seed")
-    check_.add_argument("--surface", type=float, default=1e-5,
+    check_.add_argument("--rays", type=_option("rays"), default=400, help="with --de: seeded rays (default 400)")
+    check_.add_argument("--seed", type=_option("seed"), default=0, help="with --de: the rays' seed")
+    check_.add_argument("--surface", type=_option("surface"), default=1e-5,
                         help="with --de: the estimate, in bound radii, below which a point is on the surface "
                              "(default 1e-5; raise it for thin sets whose estimate stays above it)")
     device_options(check_)
@@ -652,12 +655,13 @@ def _parser() -> argparse.ArgumentParser:
                                              "render time against error over the quality knobs "
                                              "(docs/performance.md).")
     bench_.add_argument("scene")
-    bench_.add_argument("--frames", type=int, default=30)
-    bench_.add_argument("--width", type=int)
-    bench_.add_argument("--height", type=int)
+    bench_.add_argument("--frames", type=_option("frames"), default=30)
+    bench_.add_argument("--width", type=_option("width"))
+    bench_.add_argument("--height", type=_option("height"))
     bench_.add_argument("--resolution", help="1366x768, 1920x1080, 2560x1440, 3840x2160 (or 720p, 1080p, 1440p, 4k)")
-    bench_.add_argument("--repeat", type=int, help="runs of the whole path; figures are medians (default 1); "
-                                                   "with --sweep, timed renders per row (default 5)")
+    bench_.add_argument("--repeat", type=_option("repeat"),
+                        help="runs of the whole path; figures are medians (default 1); "
+                             "with --sweep, timed renders per row (default 5)")
     bench_.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
     bench_.add_argument("--still", action="store_true",
                         help="render the file's own camera view every frame (no path, no orbit)")
@@ -684,14 +688,14 @@ def _parser() -> argparse.ArgumentParser:
                                            "the view, H shows every key. Saving the file reloads it. "
                                            "Needs a display and pygame (the 'view' extra).")
     view.add_argument("scene")
-    view.add_argument("--width", type=int, help="window width (default: the file's render width)")
-    view.add_argument("--height", type=int, help="window height (default: the file's render height)")
-    view.add_argument("--preview-scale", type=int, default=2, metavar="N",
+    view.add_argument("--width", type=_option("width"), help="window width (default: the file's render width)")
+    view.add_argument("--height", type=_option("height"), help="window height (default: the file's render height)")
+    view.add_argument("--preview-scale", type=_option("preview_scale"), default=2, metavar="N",
                       help="while moving, render at 1/N of the window's width and height (default 2)")
-    view.add_argument("--max-samples", type=int, default=64, metavar="N",
+    view.add_argument("--max-samples", type=_option("max_samples"), default=64, metavar="N",
                       help="refine a still view up to this many samples per pixel (default 64)")
     view.add_argument("--output-dir", default=".", metavar="DIR", help="where P saves the view (default: here)")
-    view.add_argument("--benchmark", type=int, metavar="FRAMES",
+    view.add_argument("--benchmark", type=_option("frames"), metavar="FRAMES",
                       help="orbit the camera for FRAMES frames, print the frame rate and exit "
                            "(SDL_VIDEODRIVER=dummy runs it without a display)")
     key_options(view)
@@ -707,13 +711,13 @@ def _parser() -> argparse.ArgumentParser:
     studio.add_argument("scene")
     studio.add_argument("--host", default="127.0.0.1",
                         help="the address to listen on (default 127.0.0.1: this machine only)")
-    studio.add_argument("--port", type=int, help="the port (default 8765, or the next free one; 0: any)")
+    studio.add_argument("--port", type=_option("port"), help="the port (default 8765, or the next free one; 0: any)")
     studio.add_argument("--no-browser", action="store_true", help="do not open the page in a browser")
     studio.add_argument("--live-size", type=_size, metavar="WxH",
                         help="the live image's size (default: as large as the page shows it)")
-    studio.add_argument("--preview-scale", type=int, default=2, metavar="N",
+    studio.add_argument("--preview-scale", type=_option("preview_scale"), default=2, metavar="N",
                         help="while anything moves, render at 1/N of the live size (default 2)")
-    studio.add_argument("--max-samples", type=int, default=64, metavar="N",
+    studio.add_argument("--max-samples", type=_option("max_samples"), default=64, metavar="N",
                         help="refine a still view up to this many samples per pixel (default 64)")
     device_options(studio)
     studio.set_defaults(run=command_studio)
@@ -725,7 +729,7 @@ def _parser() -> argparse.ArgumentParser:
     animate.add_argument("scene")
     animate.add_argument("-o", "--output", required=True,
                          help="frame files with the frame number, e.g. frames/frame_%%04d.png (.exr or .png)")
-    animate.add_argument("--fps", type=float, default=30.0, help="frames per second (default 30)")
+    animate.add_argument("--fps", type=_option("fps"), default=30.0, help="frames per second (default 30)")
     animate.add_argument("--mp4", metavar="FILE", help="also encode the frames as an MP4 (the 'mp4' extra)")
     animate.add_argument("--overwrite", action="store_true", help="render every frame, even those on disk")
     animate.add_argument("--frames", type=_frame_range, metavar="FIRST-LAST",
@@ -741,7 +745,7 @@ def _parser() -> argparse.ArgumentParser:
                                            "'mesh' extra).")
     mesh.add_argument("scene")
     mesh.add_argument("-o", "--output", required=True, help="output mesh (.stl, .ply or .obj)")
-    mesh.add_argument("--resolution", type=int, default=256, metavar="N",
+    mesh.add_argument("--resolution", type=_option("resolution"), default=256, metavar="N",
                       help="grid cells along the longest side of the bounds (default 256)")
     mesh.add_argument("--bounds", type=_bounds, metavar="XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX",
                       help="the box to mesh, written --bounds=-1,-1,-1,1,1,1 when it starts with a "
@@ -750,7 +754,7 @@ def _parser() -> argparse.ArgumentParser:
                       help="solid: the largest body alone, its internal voids filled and loose specks "
                            "removed (the default for .stl, which printers read); all: every closed surface "
                            "(the default for .ply and .obj)")
-    mesh.add_argument("--min-volume", type=float, metavar="V",
+    mesh.add_argument("--min-volume", type=_option("min_volume"), metavar="V",
                       help="with --shells solid: keep every separate body of at least this volume "
                            "(scene units cubed), not only the largest")
     mesh.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
@@ -797,6 +801,8 @@ class Terminated(BaseException):
 
 
 _TERMINATING_SIGNALS = [getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n)]
+# What the launcher passes on to the process doing the work (`entry`)
+_FORWARDED_SIGNALS = [signal.SIGINT, *_TERMINATING_SIGNALS]
 
 
 def _raise_terminated(number, frame):
@@ -805,18 +811,34 @@ def _raise_terminated(number, frame):
     raise Terminated(number)
 
 
+def _raise_interrupted(number, frame):
+    # Ctrl-C reaches this process from the terminal and again from the
+    # launcher, which passes on the SIGINT sent to it: one interrupt
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    raise KeyboardInterrupt
+
+
 @contextmanager
 def _terminating_signals_raise():
     """While the command runs, SIGTERM and SIGHUP raise Terminated (a
-    signal the caller ignores, as under nohup, stays ignored)."""
+    signal the caller ignores, as under nohup, stays ignored); under the
+    launcher, SIGINT raises KeyboardInterrupt once, and the signals it
+    blocked while starting this process are let in (one that came
+    meanwhile is raised here)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {n: signal.getsignal(n) for n in _TERMINATING_SIGNALS}
+    supervised = bool(os.environ.get(SUPERVISED_ENVIRONMENT))
+    raising = {n: _raise_terminated for n in _TERMINATING_SIGNALS}
+    if supervised:
+        raising[signal.SIGINT] = _raise_interrupted
+    previous = {n: signal.getsignal(n) for n in raising}
     for number, handler in previous.items():
-        if handler == signal.SIG_DFL:
-            signal.signal(number, _raise_terminated)
+        if handler in (signal.SIG_DFL, signal.default_int_handler):
+            signal.signal(number, raising[number])
     try:
+        if supervised and hasattr(signal, "pthread_sigmask"):
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, _FORWARDED_SIGNALS)
         yield
     finally:
         for number, handler in previous.items():
@@ -825,6 +847,12 @@ def _terminating_signals_raise():
 
 def main(argv: list[str] | None = None) -> int:
     parser = _parser()
+    argv = sys.argv[1:] if argv is None else argv
+    for item in argv:
+        option, equals, value = item.partition("=")
+        if equals and option.startswith("-") and value == "--":
+            # argparse takes '--' for the end of options and gives the option an empty list
+            parser.error(f"{option}=--: '--' is not a value for {option}")
     args = parser.parse_args(argv)
     if getattr(args, "no_cache", False):
         # Before OpenCL loads: the driver's and pyopencl's binary caches.
@@ -855,31 +883,97 @@ def main(argv: list[str] | None = None) -> int:
     except Terminated as stop:
         print(f"fractalc: stopped by {signal.Signals(stop.number).name}", file=sys.stderr)
         return 128 + stop.number
+    except Exception as error:
+        from .memory import is_out_of_memory
+        if not is_out_of_memory(error):
+            raise
+        detail = (str(error).strip().splitlines() or [""])[0]
+        print(f"fractalc: error: out of memory in 'fractalc {args.command}'{': ' + detail if detail else ''}",
+              file=sys.stderr)
+        return 1
 
 
 SUPERVISED_ENVIRONMENT = "FRACTALC_SUPERVISED"
+LAUNCHER_ENVIRONMENT = "FRACTALC_LAUNCHER_PID"    # the process doing the work exits with this one
 _CRASH_SIGNALS = ("SIGSEGV", "SIGBUS", "SIGILL", "SIGABRT", "SIGFPE")
+PR_SET_PDEATHSIG = 1          # prctl(2): a signal for this process when its parent exits
+PARENT_POLL_SECONDS = 1.0     # where prctl is missing, how often a watchdog looks for the parent
 
 
 def _child_command(argv: list[str]) -> list[str]:
     return [sys.executable, "-m", "fractalc", *argv]
 
 
+def _exit_with_launcher() -> None:
+    """The process doing the work exits when its launcher does, even by
+    kill -9 (which no handler sees): on Linux the kernel sends it SIGTERM
+    then (prctl PR_SET_PDEATHSIG; SIGKILL where SIGTERM is ignored), which
+    unwinds through every cleanup; elsewhere a watchdog thread polls the
+    parent's pid and sends the same."""
+    try:     # read once: a process this one starts has another parent
+        launcher = int(os.environ.pop(LAUNCHER_ENVIRONMENT, ""))
+    except ValueError:
+        return
+    stop = signal.SIGKILL if signal.getsignal(signal.SIGTERM) == signal.SIG_IGN else signal.SIGTERM
+    if sys.platform.startswith("linux") and _parent_death_signal(stop):
+        if os.getppid() != launcher:      # it exited before prctl
+            os.kill(os.getpid(), stop)
+        return
+
+    def watch() -> None:
+        while os.getppid() == launcher:
+            time.sleep(PARENT_POLL_SECONDS)
+        os.kill(os.getpid(), stop)
+    threading.Thread(target=watch, name="fractalc-launcher-watchdog", daemon=True).start()
+
+
+def _parent_death_signal(number: int) -> bool:
+    """prctl(PR_SET_PDEATHSIG, number) through the C library; False where
+    it cannot be called."""
+    import ctypes
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(PR_SET_PDEATHSIG, int(number), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
 def entry() -> int:
     """The `fractalc` command: `main` in a child process, so that a crash
     inside the OpenCL driver, which no Python code can catch, still ends in
-    a one-line error that says what to do."""
-    import signal
+    a one-line error that says what to do. SIGINT, SIGTERM and SIGHUP sent
+    to this process (a script's `kill -INT PID`) are passed on to the
+    child, which stops as at Ctrl-C; the child exits if this process is
+    killed (`_exit_with_launcher`)."""
     import subprocess
     if os.environ.get(SUPERVISED_ENVIRONMENT):
+        _exit_with_launcher()
         return main()
-    child = subprocess.Popen(_child_command(sys.argv[1:]), env=dict(os.environ, **{SUPERVISED_ENVIRONMENT: "1"}))
-    # Ctrl-C reaches the child from the terminal; a signal sent to this
-    # process alone is passed on
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    for name in ("SIGTERM", "SIGHUP"):
-        signal.signal(getattr(signal, name), lambda number, frame: child.send_signal(number))
-    code = child.wait()
+    launched: list = []
+
+    def forward(number, frame):
+        if launched and launched[0].poll() is None:
+            launched[0].send_signal(number)
+    # a signal this process ignores (SIGHUP under nohup) stays ignored, in the child too
+    forwarded = [n for n in _FORWARDED_SIGNALS if signal.getsignal(n) != signal.SIG_IGN]
+    previous = {n: signal.signal(n, forward) for n in forwarded}
+    blocking = hasattr(signal, "pthread_sigmask")
+    try:
+        # the child starts with these blocked, and lets them in once it
+        # handles them: a signal in between is neither lost nor a traceback
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, forwarded) if blocking else None
+        try:
+            child = subprocess.Popen(_child_command(sys.argv[1:]),
+                                     env=dict(os.environ, **{SUPERVISED_ENVIRONMENT: "1",
+                                                             LAUNCHER_ENVIRONMENT: str(os.getpid())}))
+            launched.append(child)
+        finally:
+            if blocking:
+                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        code = child.wait()
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
     if code >= 0:
         return code
     name = signal.Signals(-code).name

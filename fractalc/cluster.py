@@ -32,10 +32,17 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from .api import Image, Scene, image_from_pixels, loads
+from .api import Image, Scene, image_from_pixels, loads, require_image_memory
+from .arguments import checked
 from .errors import RenderError
+from .memory import require_memory
 
 MISSING_EXTRA = "--workers and --cluster need Dask's distributed: pip install 'fractalc[cluster]'"
+# A local worker's memory before it renders: its process (145 MB resident
+# after building a Mandelbulb's kernel) and its nanny's (68 MB), measured
+# on Linux with PoCL; the image's memory comes on top
+WORKER_BYTES = 210 * 2 ** 20
+SCHEMES = ("tcp",)      # the transports fractalc reaches a scheduler by (TLS and UCX need their own setup)
 TILE_ROWS = 64          # rows of a still's tile at most: a few MB per tile of a wide image
 BLOCK_ROWS = 4          # tiles start on whole lane blocks (the tallest, 16 lanes, is 4 rows)
 TASKS_PER_WORKER = 2    # in flight: each worker has the next task while it renders one
@@ -50,29 +57,73 @@ def installed() -> bool:
     return True
 
 
+def scheduler_address(address: str) -> str:
+    """`address` as Dask takes it, tcp://HOST:PORT (HOST:PORT alone is
+    tcp); ValueError for another scheme or no port."""
+    if not isinstance(address, str):
+        raise TypeError(f"address must be a string, tcp://HOST:PORT, not {address!r}")
+    scheme, separator, rest = address.partition("://")
+    if not separator:
+        scheme, rest = "tcp", address
+    if scheme.lower() not in SCHEMES:
+        raise ValueError(f"fractalc reaches a Dask scheduler by {', '.join(s + '://' for s in SCHEMES)} "
+                         f"only, not {scheme}:// (give tcp://HOST:PORT)")
+    host, colon, port = rest.rpartition(":")
+    if not colon or not host or not (port.isascii() and port.isdigit()) or not 0 < int(port) < 65536:
+        raise ValueError("the scheduler's address must be tcp://HOST:PORT, with a port from 1 to 65535")
+    return f"tcp://{rest}"
+
+
+def require_workers_memory(workers: int | None) -> None:
+    """Refuse a local cluster whose worker processes alone need more memory
+    than the machine has (RenderError naming `workers`)."""
+    if workers is not None:
+        require_memory(checked("workers", workers) * WORKER_BYTES, f"a local cluster of {workers} workers")
+
+
 @contextlib.contextmanager
 def connect(workers: int | None = None, address: str | None = None):
     """A Dask client: of a local cluster of `workers` processes (one thread
     each: a worker renders one task at a time on its device), or of the
-    scheduler at `address`."""
+    scheduler at `address` (tcp://HOST:PORT)."""
     if not installed():
         raise RenderError(MISSING_EXTRA)
     import distributed
+    if address is not None:
+        address = scheduler_address(address)
+    require_workers_memory(workers)
     if address is None:
         with _ctrl_c_ignored(), warnings.catch_warnings():
             # the scheduler's HTTP routes move to a free port: no dashboard is shown anyway
             warnings.filterwarnings("ignore", message="Port 8787 is already in use")
-            cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                               dashboard_address=None, silence_logs=logging.ERROR)
+            try:
+                cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                   dashboard_address=None, silence_logs=logging.ERROR)
+            except (RuntimeError, OSError, TimeoutError) as error:     # a worker that did not start
+                raise RenderError(f"cannot start a local Dask cluster of {workers or 'the default'} workers: "
+                                  f"{_first_line(_root_cause(error))}") from None
         with cluster, distributed.Client(cluster) as client:
             yield client
         return
     try:
         client = distributed.Client(address, timeout="10s")
     except (OSError, TimeoutError) as error:
-        raise RenderError(f"cannot reach the Dask scheduler at {address}: {error}") from None
+        raise RenderError(f"cannot reach the Dask scheduler at {address}: {_first_line(error)}") from None
     with client:
         yield client
+
+
+def _root_cause(error: BaseException) -> BaseException:
+    """The exception at the bottom of `error`'s chain, through the causes and
+    what they were raised while handling (Dask's own says 'Nanny failed to start')."""
+    while (error.__cause__ or error.__context__) is not None:
+        error = error.__cause__ or error.__context__
+    return error
+
+
+def _first_line(error: BaseException) -> str:
+    """Dask's connection errors run over several lines; the first says it."""
+    return (str(error).strip().splitlines() or [type(error).__name__])[0]
 
 
 @contextlib.contextmanager
@@ -295,11 +346,13 @@ def render_still(scene: Scene, client, seed: int = 0, camera=None, progress: boo
     (default: enough tiles for 4 per worker, whole lane blocks, at most
     TILE_ROWS) rendered by its workers, assembled here into the image as
     they arrive (the client holds the image and a few tiles)."""
-    if tile_rows is not None and tile_rows < 1:
-        raise ValueError(f"tile_rows must be at least 1, not {tile_rows}")
+    from .passes import channels
+    if tile_rows is not None:
+        tile_rows = checked("tile_rows", tile_rows)
     spec = scene_spec(scene, render_keys)
     settings = scene._settings(render_keys)
     height, width = settings.height, settings.width
+    require_image_memory(width, height, len(channels(settings.aovs)), path_traced=False)   # tiles arrive summed
     if tile_rows is None:
         share = -(-height // (4 * worker_count(client)))
         tile_rows = min(TILE_ROWS, -(-share // BLOCK_ROWS) * BLOCK_ROWS)

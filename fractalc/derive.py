@@ -175,11 +175,18 @@ def spectral_norm(rows) -> ir.Expr:
     return ir.op("sqrt", ir.op("max", largest, ir.const(0.0)))
 
 
+def finite_distance(distance: ir.Expr) -> ir.Expr:
+    """`distance` within +-1e30: every estimate's guard (LANGUAGE.md: an
+    estimate is finite everywhere). OpenCL's clamp is fmin(fmax(...)),
+    which takes a NaN to the lower end: inside."""
+    return ir.op("clamp", distance, ir.const(-1e30), ir.const(1e30))
+
+
 def finite_estimate(numerator: ir.Expr, denominator: ir.Expr) -> ir.Expr:
     """numerator / denominator within +-1e30, and 0 where the denominator
     is 0 (r = 0, or a point where z does not move with the point: there
     the estimate says nothing, and 0 never oversteps)."""
-    de = ir.op("clamp", ir.div(numerator, denominator), ir.const(-1e30), ir.const(1e30))
+    de = finite_distance(ir.div(numerator, denominator))
     return ir.op("select", ir.op("eq", denominator, ir.const(0.0)), ir.const(0.0), de)
 
 

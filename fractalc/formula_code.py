@@ -255,7 +255,7 @@ class Interpreter:
         if isinstance(e, ast.Binary):
             left, right = self.expr(e.left, env), self.expr(e.right, env)
             try:
-                return self.binary(e, left, right)
+                return _within_float(e, self.binary(e, left, right))
             except (ValueError, ZeroDivisionError, OverflowError):
                 raise Mistake(e.span, f"'{e.op}' is undefined for these values") from None
         if isinstance(e, ast.Chain):
@@ -275,7 +275,7 @@ class Interpreter:
             function = FUNCTIONS.get(e.name)
             if function is None:
                 raise Mistake(e.name_span, f"unknown function '{e.name}' in formula")
-            return function.apply(e, values)
+            return _within_float(e, function.apply(e, values))
         if isinstance(e, ast.Method):
             raise Mistake(e.name_span, f"'.{e.name}(...)' transforms shapes; in a formula, call "
                                        f"'{e.name}(z, ...)'")
@@ -834,11 +834,22 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
         if distance.type != "num":
             assigned = next(s for s in reversed(last.formula.final) if s.name == "distance")
             raise Mistake(assigned.value.span, f"'distance' must be a number, this is {_word(distance)}")
-        de = distance.items[0]
+        de = derive.finite_distance(distance.items[0])    # the formula's own: guarded as a derived one is
     else:
         de = _estimate(escape, final_z, rows, dr, ZERO)
     inside = None if bailout is None else ir.op("select", _inside(z_final, bailout), ir.const(-1.0), ONE)
     return Orbit(de, traps, use_scalar, inside)
+
+
+def _within_float(e: ast.Expr, value: Value) -> Value:
+    """`value`, where what it computes from constants alone is a number the
+    kernel's floats hold, as in a scene's expressions (check.py); a float
+    kernel would compute infinity."""
+    from .check import FLOAT_MAX, in_float_range
+    for item in value.items:
+        if ir.is_const(item) and not in_float_range(item.value):
+            raise Mistake(e.span, f"this gives {item.value:.3g}, beyond the kernel's floats ({FLOAT_MAX:.3g})")
+    return value
 
 
 def _jacobian(values, point, where: Span):

@@ -26,6 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .arguments import MAX_RESOLUTION, checked
+from .lower import MAX_COORDINATE
+from .memory import require_memory
 from .write import replacing
 
 FORMATS = (".stl", ".ply", ".obj")
@@ -34,6 +37,18 @@ INSTALL_HINT = "meshes need scikit-image: pip install 'fractalc[mesh]'"
 CHUNK_POINTS = 1 << 21   # distance evaluations per kernel call: ~100 MB of host arrays at most
 DEFAULT_RESOLUTION = 256
 LEVEL_CELLS = 0.5    # the level meshed, in cells (see above)
+# A cell at least this fraction of the box's largest coordinate: its
+# corners, and the normals' differences a quarter of a cell wide, stay
+# apart by 2^6 units of the last place of the kernel's numbers
+CELL_PRECISION = {False: 2.0 ** -17, True: 2.0 ** -46}     # double?
+# Memory of sampling (Grid.sampling_bytes): the slab, the plane kept and
+# marching cubes' arrays come to about SLAB_COPIES slabs; a chunk of points
+# costs CHUNK_POINT_BYTES a point (xyz and their meshgrid in float64, the
+# distances). Measured (benchmarks/mesh_memory.py's way, a sphere of 0.01
+# in a slab of the box): 2048^2 planes 272 MiB over the interpreter's, 4096^2
+# 465 MiB, against 294 MB and 700 MB estimated.
+SLAB_COPIES = 4
+CHUNK_POINT_BYTES = 80
 
 
 def require_scikit_image() -> None:
@@ -253,30 +268,76 @@ class Grid:
         return self.lower + self.spacing * np.subtract(self.counts, 1)
 
     def planes_per_slab(self, chunk_points: int = CHUNK_POINTS) -> int:
-        """z-planes evaluated per kernel call: as many as fit in a chunk."""
+        """z-planes meshed at a time: as many as fit in a chunk, at least one."""
         return max(1, chunk_points // (self.counts[0] * self.counts[1]))
 
-    def plane_points(self, first: int, count: int) -> np.ndarray:
-        """The (count * nx * ny, 3) points of z-planes first..first+count-1,
-        x varying fastest."""
+    def rows_per_call(self, chunk_points: int = CHUNK_POINTS) -> int:
+        """y-rows of a plane evaluated per kernel call, where a whole plane
+        is more than a chunk."""
+        return max(1, min(self.counts[1], chunk_points // self.counts[0]))
+
+    def plane_points(self, first: int, count: int, row: int = 0, rows: int | None = None) -> np.ndarray:
+        """The (count * rows * nx, 3) points of z-planes first..first+count-1,
+        rows `row`.. `row + rows - 1` of each (default: all), x varying fastest."""
         nx, ny, _ = self.counts
+        rows = ny - row if rows is None else rows
         x = self.lower[0] + self.spacing * np.arange(nx)
-        y = self.lower[1] + self.spacing * np.arange(ny)
+        y = self.lower[1] + self.spacing * np.arange(row, row + rows)
         z = self.lower[2] + self.spacing * np.arange(first, first + count)
         zz, yy, xx = np.meshgrid(z, y, x, indexing="ij")
         return np.stack([xx.ravel(), yy.ravel(), zz.ravel()], axis=1)
 
+    def sampling_bytes(self, chunk_points: int = CHUNK_POINTS) -> int:
+        """The memory sampling takes besides the mesh: a padded slab, the
+        plane kept from the slab before, marching cubes' work arrays on the
+        slab (SLAB_COPIES in all) and a chunk of points (float64 xyz, their
+        meshgrid, the distances)."""
+        nx, ny, _ = self.counts
+        slab = (nx + 2) * (ny + 2) * (self.planes_per_slab(chunk_points) + 1) * 4
+        return SLAB_COPIES * slab + chunk_points * CHUNK_POINT_BYTES
 
-def bounds_of(scene, bounds=None) -> tuple[np.ndarray, np.ndarray]:
-    """The box to mesh: `bounds` (xmin, ymin, zmin, xmax, ymax, zmax), else
-    the cube around the scene's bounding sphere, a little larger."""
+
+def check_bounds(bounds, resolution: int, double: bool, name: str = "bounds") -> tuple[np.ndarray, np.ndarray]:
+    """`bounds` (xmin, ymin, zmin, xmax, ymax, zmax) as (lower, upper);
+    ValueError, of `name`, where its cells would be degenerate: a side shorter than
+    one cell (longest side / `resolution`), a coordinate beyond
+    lower.MAX_COORDINATE (where the kernel clamps points), or cells too
+    small for the kernel's numbers to tell their corners apart there
+    (CELL_PRECISION: float's or double's)."""
+    try:
+        values = np.array([float(v) for v in bounds], dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"{name} must be six numbers xmin, ymin, zmin, xmax, ymax, zmax, not {bounds!r}") from None
+    if values.shape != (6,) or not np.all(np.isfinite(values)):
+        raise ValueError(f"{name} must be six finite numbers: xmin, ymin, zmin, xmax, ymax, zmax")
+    lower, upper = values[:3], values[3:]
+    if not np.all(lower < upper):
+        raise ValueError(f"{name}: each minimum must be less than its maximum")
+    if np.max(np.abs(values)) > MAX_COORDINATE:
+        raise ValueError(f"{name}: coordinates must lie within ±{MAX_COORDINATE:g}, where the kernel's points do")
+    sides = upper - lower
+    cell = float(np.max(sides)) / resolution
+    if np.min(sides) < cell:
+        axis, needed = "xyz"[int(np.argmin(sides))], math.ceil(np.max(sides) / np.min(sides))
+        raise ValueError(f"{name}: the box's {axis} side ({np.min(sides):g}) is shorter than one cell "
+                         f"({cell:g}, the longest side / resolution {resolution}); widen the box"
+                         + (f" or raise the resolution to {needed} or more" if needed <= MAX_RESOLUTION else ""))
+    largest = float(np.max(np.abs(values)))
+    if cell < largest * CELL_PRECISION[double]:
+        raise ValueError(f"{name}: cells of {cell:g} are too small for {'double' if double else 'float'} numbers "
+                         f"at coordinates up to {largest:g} (a cell must be at least "
+                         f"{largest * CELL_PRECISION[double]:.3g} there); a box nearer the origin or fewer cells"
+                         + ("" if double else ", or double precision"))
+    return lower, upper
+
+
+def bounds_of(scene, bounds=None, resolution: int = DEFAULT_RESOLUTION,
+              name: str = "bounds") -> tuple[np.ndarray, np.ndarray]:
+    """The box to mesh: `bounds` (xmin, ymin, zmin, xmax, ymax, zmax; see
+    check_bounds), else the cube around the scene's bounding sphere, a
+    little larger."""
     if bounds is not None:
-        values = np.asarray(bounds, dtype=np.float64)
-        if values.shape != (6,) or not np.all(np.isfinite(values)):
-            raise ValueError("bounds must be six finite numbers: xmin, ymin, zmin, xmax, ymax, zmax")
-        if not np.all(values[:3] < values[3:]):
-            raise ValueError("bounds: each minimum must be less than its maximum")
-        return values[:3], values[3:]
+        return check_bounds(bounds, resolution, scene.precision == "double", name)
     sphere = scene.bound()     # None for a ground plane, repetition or a warp
     if sphere is None:
         raise ValueError(f"{scene.checked.file} is unbounded (a plane, repetition or warp): "
@@ -292,9 +353,10 @@ def mesh(scene, resolution: int = DEFAULT_RESOLUTION, bounds=None, progress: boo
     distance estimate on a grid of `resolution` cells along the longest
     side of `bounds` (default: the scene's bound)."""
     require_scikit_image()
-    if isinstance(resolution, bool) or not isinstance(resolution, (int, np.integer)) or not 2 <= resolution <= 16384:
-        raise ValueError(f"resolution must be a whole number from 2 to 16384, not {resolution!r}")
-    grid = Grid.over(*bounds_of(scene, bounds), resolution)
+    resolution = checked("resolution", resolution)
+    grid = Grid.over(*bounds_of(scene, bounds, resolution), resolution)
+    require_memory(grid.sampling_bytes(chunk_points),
+                   f"meshing at resolution {resolution} ({' x '.join(map(str, grid.counts))} samples)")
     level = grid.spacing * LEVEL_CELLS
     vertices, faces = _march(scene, grid, level, progress, chunk_points)
     normals = _normals(scene, vertices, grid.spacing, chunk_points)
@@ -325,9 +387,11 @@ def _march(scene, grid: Grid, level: float, progress: bool, chunk_points: int) -
             slab = np.full((nx + 2, ny + 2, last - first + 1), outside, np.float32)
             slab[..., :1] = previous
             count = min(last, nz) - first
-            if count > 0:
-                values = scene.distance(grid.plane_points(first, count)).astype(np.float32)
-                slab[1:-1, 1:-1, 1:count + 1] = values.reshape(count, ny, nx).transpose(2, 1, 0)
+            rows = grid.rows_per_call(chunk_points) if count == 1 else ny
+            for row in range(0, ny if count > 0 else 0, rows):
+                part = min(rows, ny - row)
+                values = scene.distance(grid.plane_points(first, count, row, part)).astype(np.float32)
+                slab[1:-1, 1 + row:1 + row + part, 1:count + 1] = values.reshape(count, part, nx).transpose(2, 1, 0)
             previous = slab[..., -1:].copy()
             bar.update(max(count, 0))
             crossing = slab.min() < level < slab.max()

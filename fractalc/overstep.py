@@ -24,6 +24,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .arguments import checked
+from .memory import require_memory
+
+# memory per sample along the rays: the estimates (float64), whether each
+# is inside (bool), the ratios compared (float64)
+SAMPLE_BYTES = 17
+
 # An estimate that meets no surface yet whose median inside the bound is
 # below this (in bound radii) is small everywhere there, with no surface
 # to find: a space-filling formula's (a Kaliset measures 0.006; a thin
@@ -84,6 +91,8 @@ def measure(scene, rays: int = 400, steps: int = 1500, seed: int = 0, surface: f
     it falls to `surface` bound radii: a renderer's hit (an estimate need
     not reach 0 inside: the Mandelbox's is 1e-5 there after 12
     iterations); the escape-time set's is where orbits stop escaping."""
+    rays, seed, surface = checked("rays", rays), checked("seed", seed), checked("surface", surface)
+    require_memory(rays * steps * SAMPLE_BYTES, f"measuring along {rays} rays of {steps} steps")
     if scene.device.info.double and scene.precision != "double":
         from .api import Scene
         scene = Scene(scene.checked, scene.params, precision="double", device=scene.device_spec, lanes=scene.lanes)

@@ -91,8 +91,19 @@ def params_at(path: CameraPath, t: float) -> dict[str, float]:
     return {name: _through_keys(path, lambda k: dict(k.params).get(name), t) for name in names}
 
 
+# An animation's frames at most: a million frames is over nine hours at 30 fps
+MAX_FRAMES = 1_000_000
+
+
 def frame_times(path: CameraPath, fps: float) -> np.ndarray:
     """One time per frame at `fps`, from the first keyframe to the last,
-    both included when the duration is a whole number of frames."""
-    count = math.floor((path.end - path.start) * fps + 1e-9) + 1
+    both included when the duration is a whole number of frames;
+    ValueError for more than MAX_FRAMES frames."""
+    from .arguments import checked
+    fps = checked("fps", fps)
+    frames = (path.end - path.start) * fps
+    if frames >= MAX_FRAMES:
+        raise ValueError(f"fps {fps:g}: the path's {path.end - path.start:g} s would be {frames + 1:.3g} frames, "
+                         f"more than {MAX_FRAMES}")
+    count = math.floor(frames + 1e-9) + 1
     return path.start + np.arange(count) / fps

@@ -74,27 +74,80 @@ IMPORTANCE = True
 MIS = True
 
 
+# A map is read MAP_READ_BYTES of float rows at a time and reduced as it
+# goes, so that its memory stays that of the table, whatever the map's size
+# (benchmarks/environment_map_memory.py); a map wider than MAX_MAP_WIDTH
+# would not fit one row in it.
+MAP_READ_BYTES = 4 * 2 ** 20
+MAX_MAP_WIDTH = MAP_READ_BYTES // 12
+
+
+def _texel_of(count: int, texels: int) -> np.ndarray:
+    """The texel (row or column of the table) each of `count` source rows
+    or columns falls in: the one its centre lies in (non-decreasing)."""
+    return np.minimum((np.arange(count) + 0.5) * texels // count, texels - 1).astype(int)
+
+
 @lru_cache(maxsize=8)
 def _map_texels(path: str, modified: float) -> np.ndarray:
     import OpenImageIO as oiio
     image = oiio.ImageInput.open(path)
     if image is None:
         raise ValueError(f"cannot read the environment map {path}: {oiio.geterror() or 'unknown format'}")
-    pixels = np.asarray(image.read_image(oiio.FLOAT), dtype=np.float64)
-    image.close()
-    if pixels.ndim != 3 or pixels.shape[2] < 3:
-        raise ValueError(f"the environment map {path} must have R, G and B channels")
-    height, width = pixels.shape[:2]
-    # box filter: each texel the mean of the source pixels whose centres fall in it
-    rows = np.minimum((np.arange(height) + 0.5) * MAP_HEIGHT // height, MAP_HEIGHT - 1).astype(int)
-    columns = np.minimum((np.arange(width) + 0.5) * MAP_WIDTH // width, MAP_WIDTH - 1).astype(int)
-    sums, counts = np.zeros((MAP_HEIGHT, MAP_WIDTH, 3)), np.zeros((MAP_HEIGHT, MAP_WIDTH, 1))
-    np.add.at(sums, (rows[:, None], columns[None, :]), np.maximum(pixels[..., :3], 0.0))
-    np.add.at(counts, (rows[:, None], columns[None, :]), 1.0)
-    # a map smaller than the texels: the nearest pixel where none falls
-    nearest = pixels[(np.arange(MAP_HEIGHT) * height // MAP_HEIGHT)[:, None],
-                     (np.arange(MAP_WIDTH) * width // MAP_WIDTH)[None, :], :3]
-    return np.where(counts > 0, sums / np.maximum(counts, 1.0), np.maximum(nearest, 0.0))
+    try:
+        spec = image.spec()
+        width, height = spec.width, spec.height
+        if spec.nchannels < 3:
+            raise ValueError(f"the environment map {path} must have R, G and B channels")
+        if width > MAX_MAP_WIDTH:
+            raise ValueError(f"the environment map {path} is {width} pixels wide, more than {MAX_MAP_WIDTH}")
+        # box filter: each texel the mean of the source pixels whose centres fall in it
+        rows, columns = _texel_of(height, MAP_HEIGHT), _texel_of(width, MAP_WIDTH)
+        used_columns, column_starts = np.unique(columns, return_index=True)
+        counts = (np.bincount(rows, minlength=MAP_HEIGHT)[:, None]
+                  * np.bincount(columns, minlength=MAP_WIDTH)[None, :])[..., None]
+        sums = np.zeros((MAP_HEIGHT, MAP_WIDTH, 3))
+        # a map smaller than the table: the nearest pixel where none falls
+        near_rows = np.arange(MAP_HEIGHT) * height // MAP_HEIGHT
+        near_columns = np.arange(MAP_WIDTH) * width // MAP_WIDTH
+        nearest = np.zeros((MAP_HEIGHT, MAP_WIDTH, 3))
+        step = max(1, MAP_READ_BYTES // (width * 12))
+        for first in range(0, height, step):
+            last = min(first + step, height)
+            block = _read_rows(image, spec, first, last, path)
+            bad = ~np.isfinite(block)
+            if bad.any():
+                y, x, _ = np.argwhere(bad)[0]
+                shown = ", ".join(f"{v:g}" for v in block[y, x])
+                raise ValueError(f"the environment map {path} has a non-finite pixel ({shown}) at x {x}, y {first + y}")
+            np.maximum(block, 0.0, out=block)
+            band = rows[first:last]
+            band_starts = np.flatnonzero(np.diff(band, prepend=-1))
+            reduced = np.add.reduceat(np.add.reduceat(block, band_starts, axis=0, dtype=np.float64),
+                                      column_starts, axis=1)
+            sums[band[band_starts][:, None], used_columns[None, :]] += reduced
+            for texel in np.flatnonzero((near_rows >= first) & (near_rows < last)):
+                nearest[texel] = block[near_rows[texel] - first, near_columns]
+    finally:
+        image.close()
+    return np.where(counts > 0, sums / np.maximum(counts, 1), nearest)
+
+
+def _read_rows(image, spec, first: int, last: int, path: str) -> np.ndarray:
+    """Rows `first` .. `last` - 1 of the map's first three channels, float32
+    (a tiled file's tiles, a scanline file's scanlines)."""
+    import OpenImageIO as oiio
+    if spec.tile_width:
+        top = first - first % spec.tile_height        # whole tiles, then the rows asked for
+        bottom = min(spec.height, -(-last // spec.tile_height) * spec.tile_height)
+        pixels = image.read_tiles(0, 0, spec.x, spec.x + spec.width, spec.y + top, spec.y + bottom, 0, 1, 0, 3,
+                                  oiio.FLOAT)
+        pixels = None if pixels is None else pixels.reshape(bottom - top, spec.width, 3)[first - top:last - top]
+    else:
+        pixels = image.read_scanlines(0, 0, spec.y + first, spec.y + last, 0, 0, 3, oiio.FLOAT)
+    if pixels is None:
+        raise ValueError(f"cannot read the environment map {path}: {oiio.geterror() or 'a damaged file'}")
+    return np.asarray(pixels, dtype=np.float32).reshape(last - first, spec.width, 3)
 
 
 def environment_map(path: str) -> np.ndarray:

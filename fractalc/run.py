@@ -19,6 +19,7 @@ import numpy as np
 from .devices import Device
 from .emit import lane_block
 from .errors import RenderError
+from .memory import is_out_of_memory
 from .passes import DEFAULT_CHANNELS
 from .program import PROJECTIONS, STEREO_LAYOUTS, Camera
 
@@ -103,8 +104,7 @@ def _guard(action: str):
             return self
 
         def __exit__(self, kind, error, trace):
-            if isinstance(error, cl.MemoryError) or (
-                    isinstance(error, cl.Error) and "OUT_OF" in str(error)):
+            if error is not None and is_out_of_memory(error):
                 raise RenderError(f"out of memory while {action}") from None
             if isinstance(error, cl.Error):
                 raise RenderError(f"OpenCL failed while {action}: {error}") from None

@@ -103,6 +103,7 @@ def one_knob_changes(settings: dict) -> list[dict]:
 def parse_changes(items: list[str]) -> list[dict]:
     """`KNOB=V1,V2` items (from --vary) as one-knob changes; ValueError
     saying what is wrong."""
+    from .arguments import parse_number
     from .check import RENDER_KEYS, check_value
     changes = []
     for item in items:
@@ -112,7 +113,11 @@ def parse_changes(items: list[str]) -> list[dict]:
             raise ValueError(f"--vary takes KNOB=VALUE[,VALUE...] with KNOB one of {', '.join(KNOBS)}, "
                              f"not '{item}'")
         for text in values.split(","):
-            value = check_value(RENDER_KEYS[knob], knob, text.strip())
+            try:
+                given = parse_number(text)
+            except ValueError:
+                given = text.strip()        # a word: precision=double, normals=central
+            value = check_value(RENDER_KEYS[knob], knob, given)
             changes.append({knob: type(KNOB_GRID[knob][0])(value)})
     return changes
 

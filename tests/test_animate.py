@@ -136,7 +136,7 @@ def test_animate_writes_an_mp4_of_the_frames(scene_file, tmp_path):
 @pytest.mark.parametrize("args, message", [
     (["-o", "frames/frame.png"], "the name must hold the frame number"),
     (["-o", "frame_%d.jpg"], "frames must be .exr or .png"),
-    (["-o", "frame_%d.png", "--fps", "0"], "--fps must be greater than 0"),
+    (["-o", "frame_%d.png", "--fps", "0"], "argument --fps: must be greater than 0, not 0"),
     (["-o", "frame_%d.png", "--mp4", "out.avi"], "the name must end in .mp4"),
     (["-o", "frame_%d.png", "--frames", "3-1"], "argument --frames: '3-1' is not a frame range"),
     (["-o", "frame_%d.png", "--frames", "one"], "argument --frames: 'one' is not a frame range"),

@@ -1,19 +1,26 @@
-"""Fuzzing (issue 10): generated scenes and mutated example files, for about a minute.
+"""Fuzzing (issues 10 and 22): generated scenes and mutated example files,
+generated command lines and API calls, for about a minute.
 
 Every case that checks must build and render a 16x12 image with finite values
 (Z is +inf on misses) and finite distances; every case that does not check must
 raise a SceneError located inside the text (at the deliberate defect, for
 generated ones), never another exception. The command line must answer
-exit 2 with `FILE:LINE:COL: error:` and no traceback. The seed is fixed, so
+exit 2 with `FILE:LINE:COL: error:` and no traceback. Generated command lines
+and API calls (tests/fuzz_calls.py), each under an address-space limit, must
+answer in words: an exit code with an error line, or a result or
+SceneError/ValueError/TypeError/RenderError; never a traceback, a crash or a
+hang. The seed is fixed, so
 a run is reproducible; a failure names the seed and case to replay with
 `python benchmarks/fuzz.py --seed S --case I`. The longer run is that script.
 """
 import re
+import sys
 import time
 import warnings
 
 import pytest
 
+import fuzz_calls
 import fuzz_scenes
 from fractalc import cli
 
@@ -23,6 +30,7 @@ FRONT_END_SECONDS = 15     # check only: thousands of cases
 BUILD_SECONDS = 20         # each build costs 1-5 s on a 2-core CPU
 MOST_BUILDS = 30
 CLI_CASES = 40
+CALL_SECONDS = 20          # command lines and API calls, each in a forked process under a memory limit
 
 
 def report(seed: int, failures: list) -> str:
@@ -86,3 +94,22 @@ def test_the_check_command_answers_like_the_api(index, tmp_path, capsys):
         assert all(line.startswith(f"{path}:") and ": note: " in line for line in headers), err
     else:
         pytest.fail(report(SEED + 2, [(index, case, verdict)]))
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forks under RLIMIT_AS as Linux counts it")
+def test_command_lines_and_api_calls_answer_in_words_within_memory():
+    deadline = time.monotonic() + CALL_SECONDS
+    failures, tried = [], 0
+    with warnings.catch_warnings(), fuzz_calls.Runner() as runner:
+        warnings.simplefilter("ignore")
+        while time.monotonic() < deadline:
+            case = fuzz_calls.case(SEED + 3, tried)
+            verdict = runner.judge(case)
+            if verdict.failure:
+                failures.append((tried, case, verdict))
+            tried += 1
+    assert not failures, "\n".join(
+        f"- case {index}: {case}: {verdict.failure}: {verdict.detail[-600:]}\n"
+        f"  replay: python benchmarks/fuzz.py --calls --seed {SEED + 3} --case {index}"
+        for index, case, verdict in failures[:10])
+    assert tried >= 5, tried      # enough to mean something on a loaded machine (about 2 s a case)

@@ -2,6 +2,10 @@
 builds and renders, mistakes are located errors (never a traceback), and
 nothing from the file reaches the kernel unescaped (issue 10)."""
 
+import os
+import re
+import sys
+
 import numpy as np
 import pytest
 
@@ -251,8 +255,9 @@ def test_python_values_out_of_range_raise_value_errors_naming_the_key():
 
 
 def test_out_of_memory_is_one_line_with_exit_1(tmp_path, capsys, monkeypatch):
-    """The host's image array not fitting in memory (numpy's MemoryError;
-    simulated: a real one needs a 144 GiB array) is a runtime failure."""
+    """The host's image array not fitting in memory (numpy's MemoryError,
+    simulated: a size the machine lacks is refused before by its estimate,
+    tests/test_runtime_failures.py) is a runtime failure."""
     from fractalc import cli, run
 
     def no_memory(*args, **kwargs):
@@ -262,7 +267,7 @@ def test_out_of_memory_is_one_line_with_exit_1(tmp_path, capsys, monkeypatch):
     scene = tmp_path / "scene.frac"
     scene.write_text("scene sphere(1)\n")
     assert cli.main(["render", str(scene), "-o", str(tmp_path / "out.exr"), "-q",
-                     "--width", "65536", "--height", "65536"]) == 1
+                     "--width", "64", "--height", "48"]) == 1
     printed = capsys.readouterr().err
     assert printed.startswith("fractalc: error: out of memory") and printed.count("\n") == 1
 
@@ -403,3 +408,477 @@ def test_shapes_whose_distance_squares_a_huge_size_are_refused_at_the_value(text
         fractalc.loads(text)
     assert np.isfinite(fractalc.loads("scene capsule((0, 0, -1e17), (0, 0, 1e17)) | torus(1e17, 1e17)")
                        .distance([[0, 0, 0], [1, 2, 3]])).all()
+
+
+# ---- every option and API call answered in words (issue 22) -----------------
+
+HOSTILE_NUMBERS = ("0", "-1", "99999999999999999999", "inf", "nan", "٣")
+ALWAYS_REFUSED = ("inf", "nan", "٣")
+# options that take text (files, names, lists) rather than a number
+TEXT_OPTIONS = {"-o", "--output", "--json", "--csv", "--plot", "--mp4", "--output-dir", "--environment-map",
+                "--cluster", "--device", "--precision", "--compression", "--resolution", "--vary", "--aov",
+                "--lanes", "--preset", "--host"}
+# options whose value holds numbers in a form of its own: where a number goes
+NUMBER_IN = {"--set": "p={}", "--render": "ao={}", "--camera": "fov={}", "--bounds": "{},-1,-1,1,1,1",
+             "--frames": "{}", "--live-size": "{}x12"}
+# each command's positional scene and required options ({tmp}: the test's folder)
+REQUIRED = {"render": ["-o", "{tmp}/out.png"], "compile": ["-o", "{tmp}/out.cl"], "check": ["--de"],
+            "bench": [], "view": [], "animate": ["-o", "{tmp}/f_%03d.png"], "mesh": ["-o", "{tmp}/out.ply"],
+            "devices": [], "studio": ["--no-browser"]}
+OPTIONS_SCENE = ("param p = 1 in [0, 2]\nscene sphere(p)\nrender { width: 16, height: 12 }\n"
+                 "path { 0: { position: (0, -4, 1) }, 1: { position: (4, 0, 1) } }\n")
+
+
+def _commands():
+    from fractalc import cli
+    parser = cli._parser()
+    commands = next(a for a in parser._actions if a.dest == "command")
+    return commands.choices
+
+
+def _valued_options():
+    """(command, option string, how a number is written in it) for every
+    option of every command that takes a value, found in the parser itself
+    (a new option is covered as it is added)."""
+    found = []
+    for command, sub in _commands().items():
+        for action in sub._actions:
+            if not action.option_strings or action.nargs == 0:
+                continue
+            name = max(action.option_strings, key=len)
+            if name not in TEXT_OPTIONS:      # a new option is tried too
+                found.append((command, name, NUMBER_IN.get(name, "{}")))
+    return found
+
+
+def test_numeric_options_are_all_checked_types():
+    """No option reads its number with plain int or float, which take '٣'
+    and give no range: each is a checked type (cli._option), a form of its
+    own (NUMBER_IN) or text."""
+    for command, sub in _commands().items():
+        for action in sub._actions:
+            if action.option_strings and action.nargs != 0:
+                name = max(action.option_strings, key=len)
+                assert getattr(action.type, "argument", None) or name in NUMBER_IN or name in TEXT_OPTIONS, \
+                    f"{command} {name}: give it a checked numeric type (cli._option) or list it here"
+            assert action.type not in (int, float), f"{command} {action.option_strings}: type={action.type}"
+            if action.required and action.option_strings:      # every required option has a value here
+                assert set(action.option_strings) & set(REQUIRED[command]), (command, action.option_strings)
+
+
+class _Accepted(Exception):
+    """The options were accepted: the command got as far as loading the scene."""
+
+
+@pytest.mark.parametrize("command, option, form", _valued_options())
+def test_every_numeric_option_answers_every_hostile_number_in_words(command, option, form, tmp_path, capsys,
+                                                                    monkeypatch):
+    """0, -1, a huge value, inf, nan and a non-ASCII digit for each option:
+    a usage error naming the option (one line, exit 2) or accepted; inf,
+    nan and '٣' never; no traceback, no work started on a refused value."""
+    from fractalc import api, cli
+
+    def accepted(*args, **kwargs):
+        raise _Accepted
+    monkeypatch.setattr(api, "loads", accepted)
+    if command == "studio":       # it serves before it loads
+        server = pytest.importorskip("fractalc.studio.server")
+        monkeypatch.setattr(server, "serve", accepted)
+    scene = tmp_path / "scene.frac"
+    scene.write_text(OPTIONS_SCENE)
+    required = [part.format(tmp=tmp_path) for part in REQUIRED[command]]
+    for value in HOSTILE_NUMBERS:
+        argv = [command, str(scene), *required, f"{option}={form.format(value)}"]
+        try:
+            code = cli.main(argv)
+        except _Accepted:
+            code = "accepted"
+        except SystemExit as stop:       # argparse's own errors
+            code = stop.code
+        err = capsys.readouterr().err
+        assert "Traceback" not in err, (argv, err)
+        if code == "accepted":
+            assert value not in ALWAYS_REFUSED, f"{argv}: accepted"
+            continue
+        lines = err.strip().splitlines()
+        assert code == 2 and option in lines[-1], (argv, code, err)
+        assert lines[-1].startswith(("fractalc", str(scene))) and "error:" in lines[-1], err
+        assert not (tmp_path / "out.png").exists()
+
+
+@pytest.mark.parametrize("argv, refused", [
+    (["render", "S", "-o", "O.png", "--workers=0"], "argument --workers: must be between 1 and 1024, not 0"),
+    (["render", "S", "-o", "O.png", "--workers=99999999999999999999"], "argument --workers: must be between 1"),
+    (["render", "S", "-o", "O.png", "--seed=4294967296"], "argument --seed: must be between 0 and 4294967295"),
+    (["render", "S", "-o", "O.png", "--width=70000"], "argument --width: must be at most 65536, not 70000"),
+    (["bench", "S", "--frames=1", "--width=70000"], "argument --width: must be at most 65536, not 70000"),
+    (["animate", "S", "-o", "f_%d.png", "--fps=inf"], "argument --fps: must be finite"),
+    (["animate", "S", "-o", "f_%d.png", "--fps=99999999999999999999"], "argument --fps: must be at most 1000"),
+    (["check", "S", "--de", "--rays=100000000"], "argument --rays: must be between 1 and 1000000"),
+    (["mesh", "S", "-o", "m.ply", "--resolution=16385"], "argument --resolution: must be between 2 and 16384"),
+    (["render", "S", "-o", "O.png", "--bits=٨"], "argument --bits: '٨' is not a number"),
+    (["render", "S", "-o", "O.png", "--render", "ao=٣"], "--render ao=٣: 'ao' must be a number, not '٣'"),
+    (["render", "S", "-o", "O.png", "--set", "p=٣"], "--set p: '٣' is not a number"),
+])
+def test_options_out_of_range_as_reported(argv, refused, tmp_path, capsys):
+    """The examples of issue 22, each refused before any work, naming the option."""
+    scene = tmp_path / "scene.frac"
+    scene.write_text(OPTIONS_SCENE)
+    argv = [str(scene) if a == "S" else str(tmp_path / a) if "." in a and not a.startswith("-") else a
+            for a in argv]
+    printed = _usage_error(argv, capsys)
+    assert refused in printed and "Traceback" not in printed
+
+
+def test_a_hybrid_past_its_steps_is_refused_where_it_passes_them():
+    """1000 entries with iterations 1000 checked in 0.7 s and then built
+    for 84 s: refused at the 257th step, as MAX_SHAPES refuses shapes."""
+    from fractalc.check import MAX_HYBRID_STEPS
+    steps = ["bulb()" if i % 2 == 0 else "amazing_box(scale: -1.5)" for i in range(1000)]
+    text = f"scene fractal(hybrid({', '.join(steps)}), iterations: 1000, bound: 4)"
+    with pytest.raises(fractalc.SceneError) as error:
+        fractalc.loads(text)
+    assert error.value.column == len("scene fractal(hybrid(") + len(", ".join(steps[:MAX_HYBRID_STEPS])) + 3
+    assert f"passes {MAX_HYBRID_STEPS} formula steps per round" in error.value.message
+    with pytest.raises(fractalc.SceneError) as error:      # repeat counts count
+        fractalc.loads("scene fractal(hybrid(bulb() * 100, amazing_box() * 100) * 2, bound: 4)")
+    assert error.value.column == 59
+    fractalc.loads("scene fractal(hybrid(bulb() * 100, amazing_box() * 100, bulb(9) * 56), bound: 4)")
+
+
+FORMULA_WITH = "formula f() {{\n    z = 2 * z + c\n    final distance = {}\n}}\nscene fractal(f(), iterations: 4, bound: 2)\n"
+
+
+@pytest.mark.parametrize("precision", ["float", "double"])
+@pytest.mark.parametrize("final", ["1e30 * length(z) * 1e30", "sqrt(-length(z))", "exp(1000 * length(z))"])
+def test_a_formulas_own_estimate_is_finite_everywhere(final, precision):
+    """A formula's own `final distance` gets the guard the derived
+    estimates have: +inf and NaN come back within ±1e30."""
+    scene = fractalc.loads(FORMULA_WITH.format(final), precision=precision)
+    points = np.array([[0.1, 0.2, 0.3], [1.0, 1.0, 1.0], [0.5, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    d = scene.distance(points)
+    assert np.isfinite(d).all() and np.abs(d).max() <= 1.0001e30, d
+    assert np.isfinite(scene.render(width=16, height=12).rgba).all()
+
+
+@pytest.mark.parametrize("final, column", [("1e30 * 1e30", 22), ("exp(100)", 22), ("length(z) + 1e30 * 1e30", 34)])
+def test_a_formula_constant_beyond_float_is_an_error_at_it(final, column):
+    with pytest.raises(fractalc.SceneError) as error:
+        fractalc.loads(FORMULA_WITH.format(final))
+    assert (error.value.line, error.value.column) == (3, column)
+    assert "beyond the kernel's floats" in error.value.message
+
+
+# The API: every public function and method, each argument given None, a
+# value of the wrong type and values out of range. An argument's errors are
+# SceneError, ValueError or TypeError naming it (RenderError for memory);
+# None is accepted only where it is the default; flags take any truth value.
+
+API_SCENE = "param p = 1 in [0, 2]\nscene sphere(p)\nrender { width: 8, height: 6 }\n" \
+            "path { 0: { position: (0, -4, 1) }, 1: { position: (4, 0, 1) } }\n"
+FLAGS = {"progress", "denoise", "use_cache", "half", "overwrite"}
+ERRORS = (fractalc.SceneError, ValueError, TypeError, fractalc.RenderError)
+
+
+def _api_calls(tmp_path):
+    """(name, function, valid keyword arguments) of the public API."""
+    import functools
+
+    from fractalc import animate, paths
+    scene = fractalc.loads(API_SCENE)
+    image = scene.render()
+    (tmp_path / "scene.frac").write_text(API_SCENE)
+    return [
+        ("loads", fractalc.loads, {"text": API_SCENE, "params": {"p": 1.0}, "precision": "float", "device": None,
+                                   "path": "scene.frac", "lanes": None}),
+        ("load", fractalc.load, {"path": str(tmp_path / "scene.frac"), "params": None, "precision": None,
+                                 "device": None, "lanes": None}),
+        ("Scene.render", scene.render, {"seed": 0, "progress": False, "camera": None, "cluster": None,
+                                        "denoise": False, "width": 8, "height": 6, "samples": 1, "aovs": ()}),
+        ("Scene.distance", scene.distance, {"points": [[0.0, 0.0, 0.0]]}),
+        ("Scene.set_params", scene.set_params, {"values": {"p": 1.0}}),
+        ("Scene.kernel_source", scene.kernel_source, {"lanes": None, "max_steps": 64}),
+        ("Scene.compile", scene.compile, {"use_cache": True}),
+        ("Scene.set_defaults", scene.set_defaults, {"camera": None, "ao": 0.5}),
+        ("Scene.mesh", scene.mesh, {"resolution": 8, "bounds": None, "progress": False}),
+        ("Image.save", image.save, {"path": str(tmp_path / "image.png"), "half": False, "compression": "zip",
+                                    "bits": 8}),
+        ("Camera", fractalc.Camera, {"position": (0, -4, 1), "target": (0, 0, 0), "fov": 40, "aperture": 0,
+                                     "focus": None}),
+        ("animate.render_frames", functools.partial(animate.render_frames, scene),
+         {"pattern": str(tmp_path / "f_%02d.png"), "fps": 2, "seed": 0, "overwrite": False, "frames": (0, 0)}),
+        ("paths.frame_times", functools.partial(paths.frame_times, scene.checked.path), {"fps": 2}),
+    ]
+
+
+def _hostile_values(name: str, valid, none_means_default: bool):
+    """(value, whether it must be refused) for an argument whose valid value is `valid`."""
+    values = [(None, not none_means_default and name not in FLAGS), (object(), name not in FLAGS)]
+    if isinstance(valid, (int, float)) and not isinstance(valid, bool):
+        values += [(-1, True), (10 ** 400, True), (float("nan"), True), ("3", True)]
+    elif isinstance(valid, str):
+        values += [(b"bytes", True), (3, name not in ("device",))]
+    elif isinstance(valid, (tuple, list)) and name != "aovs":
+        values += [((float("inf"),) * len(valid), True), (("x",) * len(valid), True)]
+    elif isinstance(valid, dict):
+        values += [([1, 2], True), ({"p": 10 ** 400}, True)]
+    return values
+
+
+def test_every_api_function_answers_wrong_arguments_in_words(tmp_path):
+    import inspect
+    failures = []
+    for name, function, valid in _api_calls(tmp_path):
+        parameters = inspect.signature(function).parameters
+        for argument, good in valid.items():
+            parameter = parameters.get(argument)
+            # None: the default where it is one; a render key given as None keeps the file's value
+            none_means_default = parameter is None or parameter.default is None
+            for value, refused in _hostile_values(argument, good, none_means_default):
+                call = f"{name}({argument}={value!r:.40})"
+                try:
+                    function(**{**valid, argument: value})
+                except ERRORS as error:
+                    said = str(error)
+                    key = "points" if argument == "points" else argument
+                    if not refused:
+                        failures.append(f"{call}: refused: {said}")
+                    elif key not in said and not (argument in ("values", "params") and "param" in said) \
+                            and not (argument == "pattern" and "%d" in said):
+                        failures.append(f"{call}: {type(error).__name__} without the argument's name: {said}")
+                except Exception as error:   # noqa: BLE001 -- an internal exception is what this test finds
+                    failures.append(f"{call}: {type(error).__name__}: {error}")
+                else:
+                    if refused:
+                        failures.append(f"{call}: accepted")
+    assert not failures, "\n".join(failures)
+
+
+def test_api_examples_of_the_issue():
+    """loads(bytes), loads(None), params=[1, 2], device=0 (an index, as
+    --device 0), render(camera='x'), render(aovs=3), save(Path), 10**400."""
+    import pathlib
+    import tempfile
+    for call, error, words in [
+        (lambda: fractalc.loads(API_SCENE.encode()), TypeError, "text must be"),
+        (lambda: fractalc.loads(None), TypeError, "text must be"),
+        (lambda: fractalc.loads(API_SCENE, params=[1, 2]), TypeError, "params must be a dict"),
+        (lambda: fractalc.loads(API_SCENE).render(camera="x"), TypeError, "camera must be a fractalc.Camera"),
+        (lambda: fractalc.loads(API_SCENE).render(aovs=3), TypeError, "aovs must be a list of pass names"),
+        (lambda: fractalc.loads(API_SCENE, params={"p": 10 ** 400}), ValueError, "param 'p' must be a finite"),
+    ]:
+        with pytest.raises(error, match=words):
+            call()
+    scene = fractalc.loads(API_SCENE, device=0)
+    assert scene.device_spec == "0"
+    with tempfile.TemporaryDirectory() as folder:
+        scene.render().save(pathlib.Path(folder) / "x.exr")
+        assert (pathlib.Path(folder) / "x.exr").stat().st_size > 0
+
+
+def test_one_device_spelled_two_ways_shares_one_context():
+    """The default device and device='cpu' (here the same one): a program
+    built for one spelling ran with the other's queue (INVALID_CONTEXT)."""
+    first = fractalc.loads(API_SCENE)
+    first.distance([[0.0, 0.0, 0.0]])
+    second = fractalc.loads(API_SCENE, device=first.device.info.kind.lower())
+    assert second.device is first.device
+    np.testing.assert_array_equal(second.distance([[0.0, 0.0, 0.0]]), [-1.0])
+
+
+def test_mesh_bounds_that_make_cells_degenerate_are_refused(tmp_path, capsys):
+    """--bounds=-1e30,-1,-1,1e30,1,1 at resolution 8 wrote 'v nan ...'."""
+    scene_file = tmp_path / "scene.frac"
+    scene_file.write_text("scene sphere(1)\n")
+    out = tmp_path / "m.obj"
+    for bounds, words in [("-1e30,-1,-1,1e30,1,1", "coordinates must lie within"),
+                          ("-1e10,-1,-1,1e10,1,1", "the box's y side (2) is shorter than one cell"),
+                          ("1000000,-1,-1,1000002,1,1", "cells of 0.25 are too small for float numbers")]:
+        printed = _usage_error(["mesh", str(scene_file), "-o", str(out), "--resolution", "8",
+                                f"--bounds={bounds}"], capsys)
+        assert "--bounds" in printed and words in printed, printed
+        assert not out.exists()
+    scene = fractalc.loads("scene sphere(1).translate((1000000, 0, 0))\n", precision="double")
+    mesh = scene.mesh(resolution=8, bounds=(1e6 - 1.5, -1.5, -1.5, 1e6 + 1.5, 1.5, 1.5))  # double resolves it
+    assert np.isfinite(mesh.vertices).all() and np.isfinite(mesh.normals).all()
+
+
+# ---- environment maps: read in bands, their pixels finite (issue 22) ----------
+
+def _write_map(path, pixels, tile=0):
+    import OpenImageIO as oiio
+    height, width, channels = pixels.shape
+    fmt = oiio.UINT8 if str(path).endswith(".png") else oiio.FLOAT
+    spec = oiio.ImageSpec(width, height, channels, fmt)
+    if tile:
+        spec.tile_width = spec.tile_height = tile
+    output = oiio.ImageOutput.create(str(path))
+    assert output.open(str(path), spec), oiio.geterror()
+    output.write_image(pixels)
+    output.close()
+
+
+def _box_filtered(pixels, rows, columns):
+    """The float64 reference: each texel the mean of the pixels whose
+    centres fall in it (the nearest pixel where none does), negative
+    values taken as 0."""
+    pixels = np.maximum(pixels.astype(np.float64), 0.0)
+    height, width = pixels.shape[:2]
+    table = np.zeros((rows, columns, 3))
+    y = (np.arange(height) + 0.5) / height * rows
+    x = (np.arange(width) + 0.5) / width * columns
+    for r in range(rows):
+        for c in range(columns):
+            inside = pixels[(y >= r) & (y < r + 1)][:, (x >= c) & (x < c + 1)]
+            table[r, c] = inside.reshape(-1, pixels.shape[2])[:, :3].mean(axis=0) if inside.size \
+                else pixels[r * height // rows, c * width // columns, :3]
+    return table
+
+
+@pytest.mark.parametrize("size, tile, name", [((37, 203, 4), 0, "a.exr"), ((70, 130, 3), 16, "b.exr"),
+                                              ((5, 9, 3), 0, "small.exr")])
+def test_an_environment_map_read_in_bands_is_the_box_filtered_map(size, tile, name, tmp_path, monkeypatch):
+    """One row read at a time (a scanline file, a tiled one, a map smaller
+    than the table): the texels of the whole map's float64 box filter."""
+    from fractalc import pathtrace
+    monkeypatch.setattr(pathtrace, "MAP_READ_BYTES", 1)
+    pixels = np.random.default_rng(22).normal(1.0, 2.0, size).astype(np.float32)
+    _write_map(tmp_path / name, pixels, tile)
+    texels = pathtrace.environment_map(str(tmp_path / name))
+    np.testing.assert_allclose(texels, _box_filtered(pixels, pathtrace.MAP_HEIGHT, pathtrace.MAP_WIDTH),
+                               rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS as Linux counts it")
+def test_a_large_environment_map_is_read_in_the_memory_of_its_table(tmp_path):
+    """A 4000x2000 PNG was read whole, as float32 then float64 (290 MB;
+    an 8000x4000 one peaked at 1.5 GB): read within 96 MB of address space
+    more than the reader had before it."""
+    import subprocess
+    pixels = np.zeros((2000, 4000, 3), np.uint8)
+    pixels[..., 0] = (np.arange(2000) * 255 // 2000)[:, None]
+    _write_map(tmp_path / "sky.png", pixels)
+    code = ("import resource, sys\nfrom fractalc import pathtrace\n"
+            "used = int(next(l for l in open('/proc/self/status') if l.startswith('VmSize')).split()[1]) * 1024\n"
+            "resource.setrlimit(resource.RLIMIT_AS, (used + 96 * 2 ** 20, resource.RLIM_INFINITY))\n"
+            "texels = pathtrace.environment_map(sys.argv[1])\nprint(texels[:, 0, 0].min(), texels[:, 0, 0].max())")
+    path = os.pathsep.join([os.path.dirname(os.path.dirname(os.path.abspath(__file__))), os.environ.get("PYTHONPATH", "")])
+    result = subprocess.run([sys.executable, "-c", code, str(tmp_path / "sky.png")], capture_output=True, text=True,
+                            timeout=120, env={**os.environ, "PYTHONPATH": path})
+    assert result.returncode == 0, result.stderr[-2000:]
+    low, high = map(float, result.stdout.split())
+    assert 0 <= low < 0.05 and 0.9 < high <= 1.0     # the gradient down the rows, averaged into the table
+
+
+def test_a_map_with_a_nan_pixel_is_an_error_at_what_named_it(tmp_path, capsys):
+    """'fractalc: error: non-finite constant nan' came with no place."""
+    from fractalc.cli import main
+    pixels = np.ones((32, 64, 3), np.float32)
+    pixels[5, 7, 1] = np.nan
+    _write_map(tmp_path / "nan.exr", pixels)
+    text = 'scene sphere(1)\nrender { environment: { map: "nan.exr" } }\n'
+    (tmp_path / "scene.frac").write_text(text)
+    with pytest.raises(fractalc.SceneError) as error:
+        fractalc.load(tmp_path / "scene.frac")
+    assert (error.value.line, error.value.column) == (2, text.splitlines()[1].index('"nan.exr"') + 1)
+    assert "has a non-finite pixel (1, nan, 1) at x 7, y 5" in error.value.message
+    (tmp_path / "plain.frac").write_text("scene sphere(1)\n")
+    printed = _usage_error(["render", str(tmp_path / "plain.frac"), "-o", str(tmp_path / "o.png"),
+                            "--environment-map", str(tmp_path / "nan.exr")], capsys)
+    assert f"--environment-map {tmp_path / 'nan.exr'}: the environment map" in printed and "non-finite" in printed
+    with pytest.raises(ValueError, match="non-finite pixel"):
+        fractalc.loads("scene sphere(1)").render(environment_map=tmp_path / "nan.exr")
+    assert not (tmp_path / "o.png").exists()
+
+
+# ---- render farms and animations (issue 22) -------------------------------------
+
+@pytest.mark.parametrize("address, words", [
+    ("tls://127.0.0.1:1", "not tls://"), ("ucx://127.0.0.1:1", "not ucx://"), ("inproc://x", "not inproc://"),
+    ("tcp://localhost", "tcp://HOST:PORT, with a port from 1 to 65535"), ("tcp://host:٣", "a port from 1"),
+])
+def test_a_cluster_scheme_fractalc_does_not_support_is_refused_in_one_line(address, words, tmp_path, capsys):
+    """tls:// and ucx:// were TypeErrors from inside Dask, inproc:// 'not
+    enough values to unpack'."""
+    pytest.importorskip("distributed")
+    scene = tmp_path / "scene.frac"
+    scene.write_text("scene sphere(1)\n")
+    printed = _usage_error(["render", str(scene), "-o", str(tmp_path / "o.png"), "--cluster", address], capsys)
+    assert f"--cluster {address}: " in printed and words in printed and "Traceback" not in printed
+
+
+def test_a_cluster_that_cannot_be_reached_is_one_line(tmp_path, capsys, monkeypatch):
+    distributed = pytest.importorskip("distributed")
+    from fractalc.cli import main
+
+    def unreachable(address, timeout):
+        raise OSError(f"Timed out trying to connect to {address} after {timeout}\nmore of Dask's words")
+    monkeypatch.setattr(distributed, "Client", unreachable)
+    scene = tmp_path / "scene.frac"
+    scene.write_text("scene sphere(1)\n")
+    assert main(["render", str(scene), "-o", str(tmp_path / "o.png"), "--cluster", "farm:8786", "-q"]) == 1
+    err = capsys.readouterr().err
+    assert err == ("fractalc: error: cannot reach the Dask scheduler at tcp://farm:8786: Timed out trying to "
+                   "connect to tcp://farm:8786 after 10s\n")
+
+
+@pytest.mark.parametrize("pattern, words", [
+    ("fr/%4d/x.png", "the frame number goes in the file's name, not a folder's"),
+    ("fr/%c.png", "the name must hold the frame number once"),
+    ("fr/%d_%d.png", "the name must hold the frame number once"),
+    ("fr/100%_%d.png", "the name must hold the frame number once"),
+    ("fr/%s.png", "the name must hold the frame number once"),
+    ("fr/f\x01%d.png", "a control character"),
+    ("fr/%d.jpg", "frames must be .exr or .png"),
+])
+def test_an_animations_file_pattern_is_checked_whole_before_the_first_frame(pattern, words, tmp_path, capsys):
+    """'fr/%4d/x.png' wrote frame 0 and failed at frame 1; 'fr/%c.png' said
+    'embedded null byte'."""
+    scene = tmp_path / "scene.frac"
+    scene.write_text(OPTIONS_SCENE)
+    printed = _usage_error(["animate", str(scene), "-o", str(tmp_path / pattern), "-q"], capsys)
+    assert words in printed and "Traceback" not in printed
+    assert not (tmp_path / "fr").exists()
+    from fractalc.animate import render_frames
+    with pytest.raises(ValueError, match=re.escape(words)):
+        render_frames(fractalc.loads(OPTIONS_SCENE), str(tmp_path / pattern), 2)
+
+
+def test_a_path_too_long_for_its_fps_is_refused_before_any_frame(tmp_path, capsys):
+    scene = tmp_path / "scene.frac"
+    scene.write_text("scene sphere(1)\npath { 0: { position: (0, -4, 1) }, 1e30: { position: (4, 0, 1) } }\n")
+    printed = _usage_error(["animate", str(scene), "-o", str(tmp_path / "f_%d.png")], capsys)
+    assert "fps 30: the path's 1e+30 s would be 3e+31 frames, more than 1000000" in printed
+    assert [p.name for p in tmp_path.iterdir()] == ["scene.frac"]
+
+
+@pytest.mark.parametrize("arguments, error, name", [
+    ({"workers": 0}, ValueError, "'workers'"), ({"workers": -1}, ValueError, "'workers'"),
+    ({"workers": 10 ** 400}, ValueError, "'workers'"), ({"workers": "2"}, ValueError, "'workers'"),
+    ({"workers": object()}, ValueError, "'workers'"), ({"address": 3}, TypeError, "address"),
+    ({"address": b"tcp://h:1"}, TypeError, "address"), ({"address": "tls://h:1"}, ValueError, "tls://"),
+])
+def test_connecting_to_a_cluster_answers_wrong_arguments_before_starting_one(arguments, error, name):
+    pytest.importorskip("distributed")
+    from fractalc import cluster
+    with pytest.raises(error, match=re.escape(name)):
+        with cluster.connect(**arguments):
+            pytest.fail("a cluster started")
+
+
+def test_a_local_cluster_that_cannot_start_is_one_line(monkeypatch):
+    """Found by the fuzzer (a daemon process may not start workers): Dask's
+    'Nanny failed to start' RuntimeError, its cause said in words."""
+    distributed = pytest.importorskip("distributed")
+    from fractalc import cluster
+
+    def failing(**kwargs):
+        try:
+            raise AssertionError("daemonic processes are not allowed to have children")
+        except AssertionError as cause:
+            raise RuntimeError("Nanny failed to start.") from cause
+    monkeypatch.setattr(distributed, "LocalCluster", failing)
+    with pytest.raises(fractalc.RenderError, match="^cannot start a local Dask cluster of 2 workers: daemonic "
+                                                   "processes are not allowed to have children$"):
+        with cluster.connect(workers=2):
+            pass

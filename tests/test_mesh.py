@@ -265,7 +265,7 @@ def test_cli_writes_a_mesh(tmp_path, capsys):
 
 @pytest.mark.parametrize("args, message", [
     (["-o", "OUT.dae"], "-o OUT.dae: the output must end in one of .stl, .ply, .obj"),
-    (["-o", "OUT.stl", "--resolution", "1"], "--resolution must be from 2"),
+    (["-o", "OUT.stl", "--resolution", "1"], "argument --resolution: must be between 2 and 16384, not 1"),
     (["-o", "OUT.stl", "--bounds", "1,2,3"], "--bounds: '1,2,3' is not six numbers"),
     (["-o", "OUT.stl", "--bounds=0,0,0,1,1,0"], "each minimum must be less than its maximum"),
 ])

@@ -65,7 +65,9 @@ def test_the_command_reports_it_and_refuses_unbounded_scenes(tmp_path, capsys):
     assert "100 rays met the surface" in out and "largest estimate / distance" in out
     assert cli.main(["check", "--de", str(tmp_path / "floor.frac")]) == 2
     assert "--de: the scene has no finite bound" in capsys.readouterr().err
-    assert cli.main(["check", "--de", "--rays", "0", str(tmp_path / "bulb.frac")]) == 2
+    with pytest.raises(SystemExit) as stop:      # argparse's error: --rays is from 1 (fractalc/arguments.py)
+        cli.main(["check", "--de", "--rays", "0", str(tmp_path / "bulb.frac")])
+    assert stop.value.code == 2 and "argument --rays: must be between 1 and 1000000, not 0" in capsys.readouterr().err
 
 
 def test_the_scene_bound_is_computed_on_the_device():
@@ -87,7 +89,9 @@ def test_a_thin_set_needs_a_higher_surface_level(tmp_path, capsys):
     assert "space-filling" not in err
     assert cli.main(["check", "--de", "--rays", "40", "--surface", "1e-2", path]) == 0
     assert "rays met the surface" in capsys.readouterr().out
-    assert cli.main(["check", "--de", "--surface", "0", path]) == 2
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["check", "--de", "--surface", "0", path])
+    assert stop.value.code == 2 and "argument --surface: must be greater than 0, not 0" in capsys.readouterr().err
 
 
 def test_each_spelling_of_a_map_oversteps_alike():
