@@ -19,7 +19,8 @@ $POCL_CACHE_DIR is set): a process that dies inside the driver (a compiler
 crash) leaves a half-built entry there, which makes every later build of
 that kernel fail. A marker file lives from a process's first build to its
 normal exit; a marker whose process is gone says the cache may hold such an
-entry, and it is cleared.
+entry, and the cache is cleared, but only while no other process is using
+it (clearing it under another's build made PoCL abort that build).
 """
 from __future__ import annotations
 
@@ -223,13 +224,16 @@ def _own_driver_cache() -> None:
     clear it if a process died while using it."""
     os.environ["POCL_CACHE_DIR"] = driver_cache_dir()
     markers = cache_dir() / "building"
-    for marker in markers.glob("*") if markers.is_dir() else ():
-        if not _alive(marker.name):
-            print(f"fractalc: a fractalc process ({marker.name}) died while using the OpenCL driver; "
-                  "clearing its kernel cache. If it happens again, set FRACTALC_LANES=8 (or 4, 1), or "
-                  "run 'fractalc devices --probe'", file=sys.stderr)
-            clear_driver_cache()
-            marker.unlink(missing_ok=True)
+    found = list(markers.glob("*")) if markers.is_dir() else []
+    dead = [marker for marker in found if not _alive(marker.name)]
+    if not dead or len(dead) < len(found):
+        return      # nothing to clear, or another process builds into the cache now: the last one out clears it
+    print(f"fractalc: a fractalc process ({dead[0].name}) died while using the OpenCL driver; "
+          "clearing its kernel cache. If it happens again, set FRACTALC_LANES=8 (or 4, 1), or "
+          "run 'fractalc devices --probe'", file=sys.stderr)
+    clear_driver_cache()
+    for marker in dead:
+        marker.unlink(missing_ok=True)
 
 
 def clear_driver_cache() -> None:

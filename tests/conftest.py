@@ -49,11 +49,13 @@ def pytest_configure(config):
     record = os.environ.get("FRACTALC_RECORD_SCENES")
     if not record:
         return
+    import functools
     import json
     import fractalc
     from fractalc import api
     original = api.loads
 
+    @functools.wraps(original)      # its signature stays the API's (tests read it)
     def recording_loads(text, *args, **kwargs):
         path = kwargs.get("path", args[3] if len(args) > 3 else "<string>")
         if isinstance(text, str):

@@ -417,7 +417,7 @@ ALWAYS_REFUSED = ("inf", "nan", "٣")
 # options that take text (files, names, lists) rather than a number
 TEXT_OPTIONS = {"-o", "--output", "--json", "--csv", "--plot", "--mp4", "--output-dir", "--environment-map",
                 "--cluster", "--device", "--precision", "--compression", "--resolution", "--vary", "--aov",
-                "--lanes", "--preset", "--host"}
+                "--lanes", "--preset", "--host", "--shells"}
 # options whose value holds numbers in a form of its own: where a number goes
 NUMBER_IN = {"--set": "p={}", "--render": "ao={}", "--camera": "fov={}", "--bounds": "{},-1,-1,1,1,1",
              "--frames": "{}", "--live-size": "{}x12"}

@@ -199,6 +199,24 @@ def test_a_marker_left_by_a_dead_process_clears_the_driver_cache(tmp_path):
     assert "died while using the OpenCL driver; clearing its kernel cache" in done.stderr
 
 
+def test_a_dead_marker_waits_while_another_process_builds(tmp_path):
+    """Clearing the cache under a live process's build made PoCL abort it:
+    while one is alive, the dead marker stays for the last one out."""
+    cache = tmp_path / "cache"
+    (cache / "pocl" / "entry").mkdir(parents=True)
+    (cache / "building").mkdir()
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    (cache / "building" / dead.stdout.strip()).write_text("")
+    (cache / "building" / str(os.getpid())).write_text("")       # this test's process: alive
+    environment = {k: v for k, v in os.environ.items() if k != "POCL_CACHE_DIR"}
+    environment[CACHE_ENVIRONMENT] = str(cache)
+    done = subprocess.run([sys.executable, "-c", "from fractalc import drivers; drivers.opencl()"],
+                          capture_output=True, text=True, env=environment)
+    assert done.returncode == 0, done.stderr
+    assert (cache / "pocl" / "entry").exists() and "clearing" not in done.stderr
+    assert sorted(p.name for p in (cache / "building").iterdir()) == sorted([dead.stdout.strip(), str(os.getpid())])
+
+
 def test_a_program_without_its_kernels_is_cleared_and_built_again(monkeypatch, tmp_path):
     """As PoCL answers after a crash left a half-built cache entry: the
     program builds but has no `render` kernel."""

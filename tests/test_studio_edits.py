@@ -172,7 +172,7 @@ def test_a_render_block_is_made_where_there_is_none():
 
 @pytest.mark.parametrize("message, says", [
     ({"block": "render", "key": ["precision"], "value": "quad"}, "'precision' takes float, double, not 'quad'"),
-    ({"block": "render", "key": ["tonemap"], "value": "none\nscene box(1)"}, "takes none, reinhard, aces"),
+    ({"block": "render", "key": ["tonemap"], "value": "none\nscene box(1)"}, "takes soft, none, reinhard, aces"),
     ({"block": "render", "key": ["ao"], "value": float("inf")}, "must be a finite number"),
     ({"block": "render", "key": ["nope"], "value": 1}, "no key nope"),
     ({"block": "render", "key": ["environment", "map"], "value": "x.exr"}, "no key environment.map"),
@@ -194,7 +194,7 @@ def test_key_specs_are_the_checkers_tables():
     assert (specs["width"].kind, specs["width"].low, specs["width"].high) == (KeyKind.WHOLE, 1.0, 65536.0)
     assert (specs["epsilon"].words, specs["epsilon"].low, specs["epsilon"].low_excluded) == (("pixel",), 0.0, True)
     assert specs["background"].colour and specs["background"].words == ("transparent",)
-    assert specs["tonemap"].kind is KeyKind.WORD and specs["tonemap"].words == ("none", "reinhard", "aces")
+    assert specs["tonemap"].kind is KeyKind.WORD and specs["tonemap"].words == ("soft", "none", "reinhard", "aces")
     assert [k.name for k in specs["fog"].keys] == ["color", "density"] and specs["fog"].kind is KeyKind.BLOCK
     fov = next(s for s in key_specs("camera") if s.name == "fov")
     assert (fov.low, fov.high, fov.low_excluded, fov.high_excluded) == (0.0, 180.0, True, True)
