@@ -22,7 +22,7 @@ from .build import build
 from .devices import open_device
 from .denoise import denoise_image, require_denoiser
 from .check import FLOAT_MAX, RENDER_KEYS, check, check_param_values, check_value, in_float_range, unknown_param
-from .emit import Target, emit, uniform_source
+from .emit import Target, emit, emit_distance, uniform_source
 from .errors import RenderError, SceneError, diagnostic
 from .lanes import CHOICES as LANE_CHOICES
 from .lower import lower
@@ -139,7 +139,7 @@ class Scene:
         self.lanes = lanes      # rays per work-item; None: the device's (fractalc/lanes.py)
         self.checked = replace(checked, render=replace(checked.render, precision=precision))
         self.device_spec = None if device is None else str(device)
-        self._programs: dict = {}    # (compiled settings, lens, target) -> built program
+        self._programs: dict = {}    # (compiled settings, lens, target), or the distance program's key -> program
         self.params = {p.name: p.default for p in checked.params}
         self.set_params({} if params is None else params)
 
@@ -305,9 +305,19 @@ class Scene:
             raise ValueError(f"points must have shape (N, 3), not {points.shape}")
         if not np.isfinite(points).all():
             raise ValueError("points must be finite (no NaN or infinity)")
-        program, target = self._program(self.checked.render)
+        program, target = self._distance_program()
         return run.distances(program, self.device, points, self._param_values(),
                              target.lanes, target.double)
+
+    def _distance_program(self, escape_time_sets: bool = False):
+        """The program of the estimate alone (emit_distance): sampling it
+        needs no render kernel, which takes several times longer to build."""
+        target = self._target(self.checked.render)
+        key = ("distance", escape_time_sets, self.checked.render, target)
+        if key not in self._programs:
+            source = emit_distance(lower(self.checked, escape_time_sets=escape_time_sets), target)
+            self._programs[key] = build(source, self.device, kernels=("distance_at_points",))
+        return self._programs[key], target
 
     def escape_time_set(self, points) -> np.ndarray:
         """At (N, 3) points, the scene with each fractal that has a bailout
@@ -315,8 +325,7 @@ class Scene:
         bailout for all the iterations (what the formula means), 1 where it
         escapes; other shapes give their distances. `check --de` marches it
         to measure the estimate against the set."""
-        target = self._target(self.checked.render)
-        program = build(emit(lower(self.checked, escape_time_sets=True), target), self.device)
+        program, target = self._distance_program(escape_time_sets=True)
         return run.distances(program, self.device, points, self._param_values(), target.lanes, target.double)
 
     def mesh(self, resolution: int = 256, bounds=None, progress: bool = False):

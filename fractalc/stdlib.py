@@ -22,6 +22,7 @@ from .resources import resource_dir
 
 PRELUDE = "prelude.cl"
 TEMPLATE = "raymarch.cl"
+DISTANCE_KERNEL = "distance.cl"
 
 
 @dataclass(frozen=True)
@@ -147,6 +148,7 @@ class Library:
     signatures: dict[str, Signature]
     prelude: str
     template: str
+    distance_kernel: str    # `distance_at_points`, for render programs and distance programs alike
 
     def closure(self, roots) -> list[Function]:
         """The functions `roots` need, each after the ones it calls."""
@@ -186,7 +188,8 @@ def library() -> Library:
         called = {m for m in _IDENTIFIER.findall(body) if m in names and m != f.name}
         with_calls[f.name] = Function(f.name, f.source, f.header, f.file, tuple(sorted(called)),
                                       f.parameter_types)
-    return Library(with_calls, signatures, (root / PRELUDE).read_text(), (root / TEMPLATE).read_text())
+    return Library(with_calls, signatures, (root / PRELUDE).read_text(), (root / TEMPLATE).read_text(),
+                   (root / DISTANCE_KERNEL).read_text())
 
 
 # ---- language forms that are not library functions -------------------------

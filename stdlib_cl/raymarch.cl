@@ -808,13 +808,3 @@ __kernel VECTOR_LANES_HINT void render(__global float *out, __constant scalar *p
     store_vec3(albedo, CHANNEL_ALBEDO_R, block, pitch);
 #endif
 }
-
-// Distance estimates at points: `points` holds count x's, then count y's,
-// then count z's (count a multiple of LANES); `distances` gets count values.
-__kernel VECTOR_LANES_HINT void distance_at_points(__global const scalar *points, __global scalar *distances,
-                       __constant scalar *params, int count) {
-    int i = get_global_id(0);
-    vec3 p = v3(LOAD_LANES(i, points), LOAD_LANES(i, points + count),
-                LOAD_LANES(i, points + 2 * count));
-    STORE_LANES(distance_estimate(p, params), i, distances);
-}
