@@ -407,6 +407,8 @@ def test_params_change_the_image_without_rebuilding():
     scene = fractalc.loads(text)
     first = scene.render(width=W, height=H)
     assert build_module.statistics.builds == before + 1, "a new scene builds once"
+    assert np.allclose(scene.distance([[0.5, 0, 0]]), -0.5, atol=1e-5)
+    assert build_module.statistics.builds == before + 2, "and its estimate alone once (emit_distance)"
     builds = build_module.statistics.builds
 
     scene.set_params({"r": 1.3})
@@ -426,7 +428,9 @@ def test_params_change_the_image_without_rebuilding():
 
 def test_same_text_and_runtime_settings_do_not_rebuild():
     text = _unique_scene()
-    fractalc.loads(text).render(width=W, height=H)
+    warm = fractalc.loads(text)
+    warm.render(width=W, height=H)
+    warm.distance(np.zeros((4, 3)))     # the estimate's own program (emit_distance)
     builds = build_module.statistics.builds
     scene = fractalc.loads(text)
     small = scene.render(width=W, height=H)
