@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 from . import run
 from .build import build
 from .emit import double_literals, emit
+from .hoist import DERIVED_SLOTS
 from .lower import lower
 from .passes import channels
 from .resources import resource_dir
@@ -68,7 +69,7 @@ class Counts:
 def counting_source(source: str, param_count: int, double: bool) -> str:
     """The counting build's text of a kernel emitted with Target(count=True)."""
     helpers = (resource_dir("stdlib_cl") / "count.cl").read_text()
-    helpers = f"#define COUNT_BASE {max(param_count, 1)}\n" + (double_literals(helpers) if double else helpers)
+    helpers = f"#define COUNT_BASE {param_count + DERIVED_SLOTS}\n" + (double_literals(helpers) if double else helpers)
     head, mark, scene = source.partition(_SCENE_MARK)
     return (head + helpers + "\n" + mark + _counted_iterations(scene)).replace(_PARAMS, "__global scalar *params")
 

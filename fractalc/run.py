@@ -19,6 +19,7 @@ import numpy as np
 from .devices import Device
 from .emit import lane_block
 from .errors import RenderError
+from .hoist import DERIVED_SLOTS
 from .memory import is_out_of_memory
 from .passes import DEFAULT_CHANNELS
 from .program import PROJECTIONS, STEREO_LAYOUTS, Camera
@@ -95,6 +96,19 @@ def _constant_buffer(device: Device, values, double: bool):
     return cl.Buffer(device.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=data)
 
 
+def kernel_params(program, device: Device, params, double: bool, extra: int = 0):
+    """The kernels' `params` buffer: the scene's param values, then the
+    DERIVED_SLOTS values that the program's `derived_params` kernel
+    computes from them (fractalc/hoist.py), then `extra` zeros (the
+    counting build's counters)."""
+    import pyopencl as cl
+    data = np.zeros(len(params) + DERIVED_SLOTS + extra, dtype=_scalar(double))
+    data[:len(params)] = params
+    buffer = cl.Buffer(device.context, cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR, hostbuf=data)
+    cl.Kernel(program, "derived_params")(device.queue, (1,), None, buffer)
+    return buffer
+
+
 def _guard(action: str):
     """Turn OpenCL runtime failures into RenderError with one-line causes."""
     import pyopencl as cl
@@ -127,7 +141,7 @@ def render(program, device: Device, frame: Frame, params, lanes: int, double: bo
     tile_width, tile_height = _round_up(min(TILE_WIDTH, pitch), step_x), _round_up(min(TILE_HEIGHT, rows), step_y)
     image = np.empty((rows, pitch, len(channels)), dtype=np.float32)
     with _guard("rendering"):
-        params_buffer = _constant_buffer(device, params, double)
+        params_buffer = kernel_params(program, device, params, double)
         camera_buffer = _constant_buffer(device, frame.camera, double)
         # the kernel writes into `image` itself where the device can (CPUs):
         # no copy; mapping it at the end makes its contents current anywhere
@@ -170,12 +184,11 @@ def counted_render(program, device: Device, frame: Frame, params, lanes: int, do
     step_x, step_y = (block_width * group[0], block_height * group[1]) if group else (block_width, block_height)
     pitch, rows = _round_up(frame.width, step_x), _round_up(frame.height, step_y)
     items = (pitch // block_width) * (rows // block_height)
-    base = max(len(params), 1)
+    base = len(params) + DERIVED_SLOTS
     state = np.zeros(base + items * slots * lanes, dtype=_scalar(double))
-    state[:len(params)] = params
     with _guard("counting distance evaluations"):
         flags = cl.mem_flags
-        state_buffer = cl.Buffer(device.context, flags.READ_WRITE | flags.COPY_HOST_PTR, hostbuf=state)
+        state_buffer = kernel_params(program, device, params, double, items * slots * lanes)
         out = cl.Buffer(device.context, flags.WRITE_ONLY, rows * pitch * channels * 4)
         kernel(device.queue, (pitch // block_width, rows // block_height), group, out, state_buffer,
                _constant_buffer(device, frame.camera, double), np.int32(frame.width), np.int32(frame.height),
@@ -203,7 +216,7 @@ def render_rows(program, device: Device, frame: Frame, params, lanes: int, doubl
     launch_width = _round_up(min(TILE_WIDTH, pitch), step_x)
     tile = np.empty((bottom - top, pitch, len(channels)), dtype=np.float32)
     with _guard("rendering"):
-        params_buffer = _constant_buffer(device, params, double)
+        params_buffer = kernel_params(program, device, params, double)
         camera_buffer = _constant_buffer(device, frame.camera, double)
         out = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY, bottom * pitch * len(channels) * 4)
         for x0 in range(0, pitch, launch_width):
@@ -254,7 +267,7 @@ def distances(program, device: Device, points: np.ndarray, params, lanes: int, d
         points_buffer = cl.Buffer(device.context, flags.READ_ONLY | flags.COPY_HOST_PTR, hostbuf=planar)
         out = cl.Buffer(device.context, flags.WRITE_ONLY, result.nbytes)
         cl.Kernel(program, "distance_at_points")(device.queue, (padded // lanes,), None, points_buffer, out,
-                                   _constant_buffer(device, params, double), np.int32(padded))
+                                   kernel_params(program, device, params, double), np.int32(padded))
         cl.enqueue_copy(device.queue, result, out)
     return result[:count].astype(np.float64)
 

@@ -17,6 +17,7 @@ import fractalc
 from fractalc.count import count
 from fractalc.emit import Target, double_literals, emit
 from fractalc.lower import lower
+from fractalc.run import kernel_params
 
 # CSG, a transform, a built-in fractal with a parameter and a hybrid of
 # library formulas: every kind of code the scalar copy is made from
@@ -58,8 +59,7 @@ def test_the_scalar_copy_of_the_estimate_agrees_with_the_per_ray_one(precision):
     flags = cl.mem_flags
     queue = scene.device.queue
     points_buffer = cl.Buffer(scene.device.context, flags.READ_ONLY | flags.COPY_HOST_PTR, hostbuf=planar)
-    params = np.array([7.0], dtype=dtype)
-    params_buffer = cl.Buffer(scene.device.context, flags.READ_ONLY | flags.COPY_HOST_PTR, hostbuf=params)
+    params_buffer = kernel_params(program, scene.device, [7.0], double)
     out = np.empty(len(points), dtype=dtype)
     out_buffer = cl.Buffer(scene.device.context, flags.WRITE_ONLY, out.nbytes)
     cl.Kernel(program, "uniform_at_points")(queue, (len(points),), None, points_buffer, out_buffer,

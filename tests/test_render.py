@@ -577,7 +577,9 @@ STANDALONE_RUNNER = textwrap.dedent("""\
     up = np.cross(right, forward)
     tan_half = np.tan(np.radians(spec["fov"]) / 2)
     camera = np.array([*position, *forward, *right, *up, tan_half], dtype=scalar)
-    params = np.array(spec["params"] or [0.0], dtype=scalar)
+    # the scene's params, then the slots that derived_params fills from them
+    slots = int(re.search(r"fills the\s+(?://\s+)?(\d+) slots", source).group(1))
+    params = np.array([*spec["params"], *[0.0] * slots], dtype=scalar)
 
     # fractalc's default device: the first GPU, else the first device
     devices = [d for platform in cl.get_platforms() for d in platform.get_devices()]
@@ -591,7 +593,8 @@ STANDALONE_RUNNER = textwrap.dedent("""\
     out = np.empty((rows, pitch, 9), dtype=np.float32)
     mf = cl.mem_flags
     out_buffer = cl.Buffer(context, mf.WRITE_ONLY, out.nbytes)
-    params_buffer = cl.Buffer(context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=params)
+    params_buffer = cl.Buffer(context, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=params)
+    program.derived_params(queue, (1,), None, params_buffer)
     camera_buffer = cl.Buffer(context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=camera)
     program.render(queue, (pitch // block_x, rows // block_y), None, out_buffer, params_buffer,
                    camera_buffer, np.int32(width), np.int32(height), np.int32(0), np.int32(0),
