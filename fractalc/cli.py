@@ -369,7 +369,7 @@ def command_bench(args) -> int:
                 raise UsageError(f"{name} goes with --sweep")
         if args.count:
             from .count import count, table as count_table
-            counts = count(_load(args), width, height)
+            counts = count(_load(args), width, height, timed_frames=args.frames)
             print(count_table(counts))
             if args.json:
                 _write_text_atomically(args.json, json.dumps(counts.as_dict(), indent=2) + "\n")

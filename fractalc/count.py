@@ -14,6 +14,8 @@ from run to run (no atomics: each work-item owns its counters).
 from __future__ import annotations
 
 import re
+import statistics
+import time
 from dataclasses import dataclass, replace
 
 from . import run
@@ -46,6 +48,13 @@ class Counts:
     precision: str
     evaluations: dict          # purpose -> distance evaluations, all pixels together
     iterations: int            # formula iterations in those evaluations
+    frame_seconds: float | None = None    # the median time of the same render (normal kernel), if timed
+
+    @property
+    def per_second(self) -> float | None:
+        """Evaluations per second of the normal kernel's render: falls where
+        an evaluation costs more, however many the march makes."""
+        return None if not self.frame_seconds else self.total / self.frame_seconds
 
     @property
     def pixels(self) -> int:
@@ -63,7 +72,8 @@ class Counts:
                 "precision": self.precision, "evaluations": dict(self.evaluations),
                 "evaluations_per_pixel": self.total / self.pixels,
                 "by_purpose_per_pixel": self.per_pixel(),
-                "iterations_per_evaluation": self.iterations / max(self.total, 1)}
+                "iterations_per_evaluation": self.iterations / max(self.total, 1),
+                "frame_seconds": self.frame_seconds, "evaluations_per_second": self.per_second}
 
 
 def counting_source(source: str, param_count: int, double: bool) -> str:
@@ -115,9 +125,11 @@ def _declares_exit_first(lines: list[str], i: int) -> bool:
     return False
 
 
-def count(scene, width: int | None = None, height: int | None = None, camera=None) -> Counts:
+def count(scene, width: int | None = None, height: int | None = None, camera=None, timed_frames: int = 0) -> Counts:
     """Distance evaluations of one render of `scene` (its file's view and
-    settings unless given), by purpose, and the formula iterations in them."""
+    settings unless given), by purpose, and the formula iterations in them;
+    with `timed_frames`, the median time of that many renders of the same
+    view with the normal kernel (after one that builds it)."""
     settings = scene.checked.render
     width, height = width or settings.width, height or settings.height
     camera = camera or scene.checked.camera
@@ -131,8 +143,14 @@ def count(scene, width: int | None = None, height: int | None = None, camera=Non
                                   COUNT_SLOTS, len(channels(settings.aovs)))
     totals = counters.sum(axis=0)
     evaluations = {p: int(round(totals[BOOKKEEPING_SLOTS + i])) for i, p in enumerate(PURPOSES)}
+    seconds = []
+    for frame_index in range(timed_frames + 1 if timed_frames else 0):
+        start = time.perf_counter()
+        scene.render(width=width, height=height, camera=camera)
+        if frame_index:
+            seconds.append(time.perf_counter() - start)
     return Counts(scene.checked.file, width, height, target.lanes, settings.precision, evaluations,
-                  int(round(totals[-1])))
+                  int(round(totals[-1])), statistics.median(seconds) if seconds else None)
 
 
 def table(counts: Counts) -> str:
@@ -143,6 +161,8 @@ def table(counts: Counts) -> str:
     rows = [("scene", c.scene), ("resolution", f"{c.width}x{c.height}"),
             ("kernel", f"{c.precision}, {c.lanes} ray{'s' if c.lanes > 1 else ''} per work-item"),
             ("evaluations/pixel", f"{c.total / c.pixels:.2f} ({c.total:,} in all)")]
+    if c.per_second is not None:
+        rows.append(("evaluations/second", f"{c.per_second / 1e6:.2f} M (frame {c.frame_seconds * 1e3:.1f} ms)"))
     rows += [(f"  {p}", f"{per_pixel[p]:.2f} ({c.evaluations[p]:,})") for p in PURPOSES]
     rows.append(("iterations/eval", f"{c.iterations / max(c.total, 1):.2f}"))
     return aligned(rows)

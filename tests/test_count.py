@@ -185,7 +185,7 @@ def test_bench_count_prints_and_writes_the_counts(tmp_path):
     scene_file.write_text(LIT)
     out = tmp_path / "counts.json"
     result = subprocess.run([sys.executable, "-m", "fractalc", "bench", "--count", str(scene_file),
-                             "--width", "8", "--height", "6", "--json", str(out)],
+                             "--width", "8", "--height", "6", "--frames", "2", "--json", str(out)],
                             capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     figures = json.loads(out.read_text())
@@ -193,6 +193,11 @@ def test_bench_count_prints_and_writes_the_counts(tmp_path):
     assert set(figures["by_purpose_per_pixel"]) == set(PURPOSES)
     assert math.isclose(figures["evaluations_per_pixel"], sum(figures["by_purpose_per_pixel"].values()))
     assert f"{figures['evaluations_per_pixel']:.2f}" in result.stdout
+    # beside them, evaluations per second of the normal kernel's render of that view
+    total = figures["evaluations_per_pixel"] * 8 * 6
+    assert figures["frame_seconds"] > 0
+    assert math.isclose(figures["evaluations_per_second"], total / figures["frame_seconds"], rel_tol=1e-9)
+    assert f"{figures['evaluations_per_second'] / 1e6:.2f} M" in result.stdout
     refused = subprocess.run([sys.executable, "-m", "fractalc", "bench", "--count", "--sweep", str(scene_file)],
                              capture_output=True, text=True, timeout=60)
     assert refused.returncode == 2 and "--count" in refused.stderr
