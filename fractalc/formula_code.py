@@ -532,6 +532,7 @@ FUNCTIONS: dict[str, Function] = {
     "pow": Function(("any", "any"), _map("pow"), "pow(x, y)"),
     "clamp": Function(("any", "any", "any"), _map("clamp"), "clamp(x, low, high)"),
     "mix": Function(("any", "any", "any"), _map("mix"), "mix(a, b, t)"),
+    "within": Function(("any", "any", "any"), _map("within"), "within(x, low, high)"),
     "select": Function(("m", "any", "any"), _select, "select(condition, if_true, if_false)"),
     "length": Function(("v",), _vector_fn(ir.length, "num"), "length(v)"),
     "dot": Function(("v", "v"), _vector_fn(ir.dot, "num"), "dot(a, b)"),

@@ -248,6 +248,10 @@ OPS: dict[str, OpRule] = {
     "and": OpRule(2, lambda a, b: float(bool(a) and bool(b)), MASK, lambda a, b: f"({a} & {b})", None),
     "or": OpRule(2, lambda a, b: float(bool(a) or bool(b)), MASK, lambda a, b: f"({a} | {b})", None),
     "not": OpRule(1, lambda a: float(not a), MASK, lambda a: f"(!{a})", None),
+    # a promise, no code: x, which the library knows lies in [low, high]
+    # (fractalc/ranges.py reads it where intervals alone are too wide)
+    "within": OpRule(3, lambda x, low, high: x, REAL, lambda x, low, high: x,
+                     lambda x, low, high, dx, dlow, dhigh: dx),
     # rendered by the emitter: SELECT for a per-ray condition, ?: for a uniform one
     "select": OpRule(3, lambda c, a, b: a if c else b, REAL, None,
                      lambda c, a, b, dc, da, db: op("select", c, da, db)),
@@ -535,6 +539,38 @@ def rebuild(roots: tuple, replacements: dict) -> tuple:
             old = children(node)
             new = [made[c] for c in old]
             made[node] = node if all(a is b for a, b in zip(old, new)) else _with_children(node, new)
+    return tuple(made[r] for r in roots)
+
+
+def transform(roots: tuple, rewrite: Callable) -> tuple:
+    """`roots` rebuilt from the leaves up: each node with its rebuilt
+    children, folded as the builders fold (operations through `op`, a
+    branch whose condition became constant as the side it takes, a loop
+    condition that became true as none), then `rewrite(node, rebuilt)`,
+    which gives the node to use in its place."""
+    made: dict = {}
+    for root in roots:
+        for node in walk(root):
+            if node in made:
+                continue
+            old = children(node)
+            new = [made[c] for c in old]
+            if all(a is b for a, b in zip(old, new)):
+                rebuilt = node
+            elif isinstance(node, Op):
+                try:
+                    rebuilt = op(node.op, *new)
+                except (ValueError, ZeroDivisionError, OverflowError):   # constants outside the domain
+                    rebuilt = _with_children(node, new)
+            elif isinstance(node, Out) and isinstance(new[0], Branch) and is_const(new[0].condition):
+                side = new[0].then if new[0].condition.value else new[0].otherwise
+                rebuilt = side[node.index]
+            else:
+                rebuilt = _with_children(node, new)
+                if isinstance(rebuilt, Loop) and rebuilt.condition is not None and is_const(rebuilt.condition) \
+                        and rebuilt.condition.value:
+                    rebuilt = Loop(rebuilt.level, rebuilt.init, rebuilt.next, None, rebuilt.count)
+            made[node] = rewrite(node, rebuilt)
     return tuple(made[r] for r in roots)
 
 

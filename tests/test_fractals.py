@@ -463,7 +463,9 @@ def _function_body(source, signature):
 
 
 # the margin R * MARGIN, or R itself where MARGIN is 1 (folded)
-_MARGIN = r"(\w+)" if MARGIN == 1 else rf"\((\w+) \* {MARGIN}f?\)"
+# (R: a temporary, or a derived param computed once per launch)
+_RADIUS = r"(\w+|params\[\d+\])"
+_MARGIN = _RADIUS if MARGIN == 1 else rf"\({_RADIUS} \* {MARGIN}f?\)"
 BOUND_TEST = re.compile(rf"^\((\w+) < {_MARGIN}\)$")
 BOUND_IF = re.compile(r"^(\s*)if \(ANY\((\w+)\)\) \{")
 
@@ -471,7 +473,8 @@ BOUND_IF = re.compile(r"^(\s*)if \(ANY\((\w+)\)\) \{")
 def _check_bounded_structure(source, names):
     """Each fractal's loop sits in an `if (ANY(m))` block, m = (b < R *
     MARGIN), b = sd_sphere(point, R) and R = <name>_bound_radius(...),
-    assigned before, and the block ends by selecting the fractal's value
+    assigned before (or a derived param that the derived_params kernel
+    computes so), and the block ends by selecting the fractal's value
     where m holds."""
     body = _function_body(source, "real distance_estimate(")
     lines = body.splitlines()
@@ -480,6 +483,10 @@ def _check_bounded_structure(source, names):
         m = re.match(r"\s*(?:real|mask) (\w+) = (.*);$", line)
         if m:
             assigned[m.group(1)] = m.group(2)
+    derived = _function_body(source, "__kernel void derived_params(")
+    computed = dict(re.findall(r"scalar (\w+) = uniform_(.*);", derived))
+    for slot, value in re.findall(r"(params\[\d+\]) = \(scalar\)(\w+);", derived):
+        assigned[slot] = computed.get(value, value)
     found = []
     for n, line in enumerate(lines):
         if not re.match(r"\s*for \(int ", line):
@@ -495,7 +502,7 @@ def _check_bounded_structure(source, names):
         assert test, assigned[near]
         bound_var, radius_var = test.group(1), test.group(2)
         bound_text = assigned[bound_var]
-        assert re.fullmatch(rf"sd_sphere\(.*, (\(real\))?{radius_var}\)", bound_text), bound_text
+        assert re.fullmatch(rf"sd_sphere\(.*, (\(real\))?{re.escape(radius_var)}\)", bound_text), bound_text
         name = re.match(r"(\w+)_bound_radius\(", assigned[radius_var]).group(1)
         found.append(name)
         value = next(v for v, text in assigned.items() if text == bound_var)   # the block's result

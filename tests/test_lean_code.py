@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import fractalc
+from fractalc import ir, ranges
 from fractalc.emit import Target, emit_distance
 from fractalc.lower import lower
 
@@ -59,3 +60,46 @@ def test_derived_params_follow_the_params():
         scene.set_params({"power": power, "angle": angle})
         literal = fractalc.loads(BULB.replace("power: power", f"power: {power}").replace("angle * 2", f"{angle * 2}"))
         assert np.allclose(scene.distance(points), literal.distance(points), rtol=1e-5, atol=1e-6)
+
+
+GUARDED = """
+param power = 8 in [2, 16]
+param bailout = 2 in [1, BAILOUT_HIGH]
+scene mandelbulb(power: power, iterations: 12, bailout: BAILOUT)
+render { width: 64, height: 48 }
+"""
+OVERFLOW_TEST = re.compile(r"<= 1e\+36f\)")      # |z|^2 <= OVERFLOW_LENGTH^2, the overflow guard
+ESCAPE_TEST = re.compile(r"1000000000000\.0f <")   # r^power > 1e12: the formula's own overflow branch
+
+
+@pytest.mark.parametrize("bailout, high, guarded", [
+    ("2", "2", False),              # |z| <= 2: |z^power + c|^2 stays below 1e11
+    ("1e6", "2", True),             # |z| up to 1e6: z^8 overflows past 1e36
+    ("bailout", "2", False),        # a param bailout within [1, 2]
+    ("bailout", "1e6", True),       # a param whose range lets it overflow
+])
+def test_overflow_guards_only_where_they_can_fire(bailout, high, guarded):
+    source = fractalc.loads(GUARDED.replace("BAILOUT_HIGH", high).replace("BAILOUT", bailout)).kernel_source(lanes=8)
+    body = _function(source, "distance_estimate")
+    assert bool(OVERFLOW_TEST.search(body)) == guarded
+    assert bool(ESCAPE_TEST.search(body)) == guarded
+    # the stopped flag goes with them: the loop's test is the bailout's alone
+    assert bool(re.search(r"a0 = a0 & \(\(!s\d+\) & ", body)) == guarded
+
+
+def test_the_analysis_keeps_what_can_happen():
+    x, y = ir.Comp(ir.Var("p", ir.VEC3), 0), ir.Comp(ir.Var("p", ir.VEC3), 1)
+    wave = ir.op("sin", x)
+    (kept,) = ranges.simplify((ir.op("min", wave, ir.const(0.5)),), {})
+    assert kept.op == "min"                             # sin reaches above 0.5
+    (dropped,) = ranges.simplify((ir.op("min", wave, ir.const(2.0)),), {})
+    assert dropped is wave
+    # a clamp guards a NaN: 0 / 0 where y = 0
+    ratio = ir.div(x, y)
+    (guard,) = ranges.simplify((ir.op("clamp", ir.op("sin", ratio), ir.const(-1.0), ir.const(1.0)),), {})
+    assert guard.op == "clamp"
+    # a param's declared range decides a comparison of it, or leaves it
+    power = ir.Param(0, "power")
+    chosen = ir.op("select", ir.op("lt", ir.mul(power, wave), ir.const(20.0)), x, y)
+    assert ranges.simplify((chosen,), {0: (2.0, 16.0)}) == (x,)
+    assert ranges.simplify((chosen,), {0: (2.0, 32.0)}) == (chosen,)
