@@ -301,11 +301,31 @@ def _simplify(name: str, args: tuple) -> Expr | None:
         for known, other in ((args[0], args[1]), (args[1], args[0])):
             if is_const(known) and bool(known.value) == (name == "and"):
                 return other
+    if name == "pow" and is_const(args[1]) and args[1].value in _SMALL_POWERS:
+        return _power(args[0], int(args[1].value))
     if name == "select" and is_const(args[0]):
         return args[1] if args[0].value else args[2]
     if name == "select" and args[1] == args[2]:
         return args[1]
     return None
+
+
+# whole exponents that pow(x, n) computes as n's squarings and products
+# (pow(x, 32): five squarings, where pow costs ~10x an exp and a log on
+# vector lanes); past them pow's one rounding beats log2(n) of them
+_SMALL_POWERS = frozenset(float(n) for n in range(1, 33))
+
+
+def _power(x: Expr, n: int) -> Expr:
+    """x^n, n >= 1, by squaring."""
+    result, square = None, x
+    while n:
+        if n & 1:
+            result = square if result is None else mul(result, square)
+        n >>= 1
+        if n:
+            square = mul(square, square)
+    return result
 
 
 def const(value: float) -> Const:

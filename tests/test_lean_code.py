@@ -103,3 +103,14 @@ def test_the_analysis_keeps_what_can_happen():
     chosen = ir.op("select", ir.op("lt", ir.mul(power, wave), ir.const(20.0)), x, y)
     assert ranges.simplify((chosen,), {0: (2.0, 16.0)}) == (x,)
     assert ranges.simplify((chosen,), {0: (2.0, 32.0)}) == (chosen,)
+
+
+@pytest.mark.parametrize("n, products", [(2, 1), (8, 3), (32, 5), (7, 4)])
+def test_whole_powers_are_products(n, products):
+    x = ir.Comp(ir.Var("p", ir.VEC3), 0)
+    power = ir.op("pow", x, ir.const(n))
+    nodes = [node for node in ir.walk(power) if isinstance(node, ir.Op)]
+    assert {node.op for node in nodes} == {"*"} and len(nodes) == products
+    points = np.array([[1.1, 0, 0], [-1.3, 0, 0], [0, 0, 0]])
+    assert np.allclose(ir.evaluate_at((power,), points)[0], points[:, 0] ** n, rtol=1e-14)
+    assert ir.op("pow", x, ir.const(2.5)).op == "pow"
