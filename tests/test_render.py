@@ -578,7 +578,7 @@ STANDALONE_RUNNER = textwrap.dedent("""\
     tan_half = np.tan(np.radians(spec["fov"]) / 2)
     camera = np.array([*position, *forward, *right, *up, tan_half], dtype=scalar)
     # the scene's params, then the slots that derived_params fills from them
-    slots = int(re.search(r"fills the\s+(?://\s+)?(\d+) slots", source).group(1))
+    slots = int(re.search(r"fills the\\s+(?://\\s+)?(\\d+) slots", source).group(1))
     params = np.array([*spec["params"], *[0.0] * slots], dtype=scalar)
 
     # fractalc's default device: the first GPU, else the first device
