@@ -15,6 +15,7 @@ import re
 from dataclasses import dataclass
 
 from . import __version__, ir, pathtrace, ranges
+from .check import FLOAT_MAX
 from .hoist import DERIVED_SLOTS, Hoisted, hoist
 from .lower import POINT, SceneIR
 from .schedule import ForBlock, Hoist, IfBlock, schedule, varying
@@ -785,7 +786,7 @@ def _lean(roots: tuple, scene_ir: SceneIR) -> Hoisted:
     """`roots` without the guards that cannot fire (fractalc/ranges.py),
     their uniform values hoisted into derived params (fractalc/hoist.py)."""
     params = scene_ir.scene.params
-    declared = {p.index: (-ranges.FLOAT_MAX if p.low is None else p.low, ranges.FLOAT_MAX if p.high is None else p.high)
+    declared = {p.index: (-FLOAT_MAX if p.low is None else p.low, FLOAT_MAX if p.high is None else p.high)
                 for p in params}
     return hoist(ranges.simplify(roots, declared), len(params))
 

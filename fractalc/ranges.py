@@ -20,8 +20,8 @@ import math
 from dataclasses import dataclass
 
 from . import ir
+from .check import FLOAT_MAX
 
-FLOAT_MAX = 3.4028234663852886e38
 ROUNDING = 1e-5        # relative widening of each computed bound: float's rounding and the library's ulps
 TINY = 1e-37           # and absolute, around 0
 WIDEN_AFTER = 16       # loop iterations before growing bounds go to infinity
@@ -53,7 +53,7 @@ class Range:
 FULL = Range(-INF, INF, True)
 ANY_MASK = Range(0.0, 1.0)
 TRUE, FALSE = Range(1.0, 1.0), Range(0.0, 0.0)
-POINT = Range(-FLOAT_MAX, FLOAT_MAX)
+FINITE = Range(-FLOAT_MAX, FLOAT_MAX)
 
 
 def _rounded(low: float, high: float, nan: bool) -> Range:
@@ -225,7 +225,8 @@ def _scaled(factor: float):
 
 
 def _within(x: Range, low: Range, high: Range) -> Range:
-    return Range(max(x.low, low.low), min(x.high, high.high)) if low.low <= high.high else x
+    promised = Range(low.low, high.high)
+    return x.meet(promised) if x.low <= promised.high and promised.low <= x.high else promised
 
 
 RULES = {
@@ -317,9 +318,9 @@ class _Analysis:
         if isinstance(node, ir.Const):
             return _exact(node.value)
         if isinstance(node, ir.Param):
-            return self.params.get(node.index, POINT)
+            return self.params.get(node.index, FINITE)
         if isinstance(node, ir.Comp):
-            return POINT if isinstance(node.vector, ir.Var) else FULL
+            return FINITE if isinstance(node.vector, ir.Var) else FULL
         if isinstance(node, ir.Call):
             return FULL if node.type != ir.VEC3 else None
         if isinstance(node, (ir.Var, ir.Vec)):
