@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import sys
-from collections import deque
+from collections import OrderedDict, deque
 from dataclasses import dataclass
 from typing import Callable
 
@@ -96,16 +96,30 @@ def _constant_buffer(device: Device, values, double: bool):
     return cl.Buffer(device.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=data)
 
 
+# the params buffers of the last few (program, param values): the derived
+# params are computed once when the params change, not per frame
+_PARAMS_BUFFERS: OrderedDict = OrderedDict()
+PARAMS_BUFFERS_KEPT = 16
+
+
 def kernel_params(program, device: Device, params, double: bool, extra: int = 0):
     """The kernels' `params` buffer: the scene's param values, then the
     DERIVED_SLOTS values that the program's `derived_params` kernel
     computes from them (fractalc/hoist.py), then `extra` zeros (the
-    counting build's counters)."""
+    counting build's counters, which its kernel writes: never shared)."""
     import pyopencl as cl
+    key = (program, tuple(float(v) for v in params), double)
+    if not extra and key in _PARAMS_BUFFERS:
+        _PARAMS_BUFFERS.move_to_end(key)
+        return _PARAMS_BUFFERS[key]
     data = np.zeros(len(params) + DERIVED_SLOTS + extra, dtype=_scalar(double))
     data[:len(params)] = params
     buffer = cl.Buffer(device.context, cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR, hostbuf=data)
     cl.Kernel(program, "derived_params")(device.queue, (1,), None, buffer)
+    if not extra:
+        _PARAMS_BUFFERS[key] = buffer
+        while len(_PARAMS_BUFFERS) > PARAMS_BUFFERS_KEPT:
+            _PARAMS_BUFFERS.popitem(last=False)
     return buffer
 
 
