@@ -51,6 +51,7 @@ def test_distance_program_hoists_too():
     assert "__kernel void derived_params" in source
 
 
+@pytest.mark.opencl
 def test_derived_params_follow_the_params():
     # the derived values are computed again for new param values: the
     # distances equal those of the scene with the values written in
