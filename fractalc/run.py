@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import sys
+import threading
 from collections import OrderedDict, deque
 from dataclasses import dataclass
 from typing import Callable
@@ -97,8 +98,10 @@ def _constant_buffer(device: Device, values, double: bool):
 
 
 # the params buffers of the last few (program, param values): the derived
-# params are computed once when the params change, not per frame
+# params are computed once when the params change, not per frame (a lock:
+# the studio renders from more than one thread)
 _PARAMS_BUFFERS: OrderedDict = OrderedDict()
+_PARAMS_BUFFERS_LOCK = threading.Lock()
 PARAMS_BUFFERS_KEPT = 16
 
 
@@ -109,17 +112,19 @@ def kernel_params(program, device: Device, params, double: bool, extra: int = 0)
     counting build's counters, which its kernel writes: never shared)."""
     import pyopencl as cl
     key = (program, tuple(float(v) for v in params), double)
-    if not extra and key in _PARAMS_BUFFERS:
-        _PARAMS_BUFFERS.move_to_end(key)
-        return _PARAMS_BUFFERS[key]
+    with _PARAMS_BUFFERS_LOCK:
+        if not extra and key in _PARAMS_BUFFERS:
+            _PARAMS_BUFFERS.move_to_end(key)
+            return _PARAMS_BUFFERS[key]
     data = np.zeros(len(params) + DERIVED_SLOTS + extra, dtype=_scalar(double))
     data[:len(params)] = params
     buffer = cl.Buffer(device.context, cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR, hostbuf=data)
     cl.Kernel(program, "derived_params")(device.queue, (1,), None, buffer)
     if not extra:
-        _PARAMS_BUFFERS[key] = buffer
-        while len(_PARAMS_BUFFERS) > PARAMS_BUFFERS_KEPT:
-            _PARAMS_BUFFERS.popitem(last=False)
+        with _PARAMS_BUFFERS_LOCK:
+            _PARAMS_BUFFERS[key] = buffer
+            while len(_PARAMS_BUFFERS) > PARAMS_BUFFERS_KEPT:
+                _PARAMS_BUFFERS.popitem(last=False)
     return buffer
 
 
