@@ -17,28 +17,27 @@ from enum import Enum
 
 from . import ast, formula_code, ir, pathtrace
 from .errors import Diagnostic, SceneError, Severity, Span, diagnostic
-from .program import (DEFAULT_MATERIAL, PROJECTIONS, STEREO_LAYOUTS, Camera, CameraPath, CheckedScene, Coloring,
-                      Combination, Environment, Fog, Fractal, Glow, Keyframe, Light, Material, ParamCheck, ParamInfo,
-                      Preset, Primitive, RenderSettings, Shape, Slice, Transformed, WithMaterial, cosine_palette,
-                      light_vector_key)
+from .program import (CAMERA_KEYS, DEFAULT_MATERIAL, LIGHT_KEYS, MATERIAL_KEYS, RENDER_KEYS, Camera, CameraPath,
+                      CheckedScene, Coloring, Combination, CombinationKind, Fractal, Keyframe, Light, LightKind,
+                      Material, ParamCheck, ParamInfo, Preset, Primitive, RenderSettings, Shadows, Shape,
+                      Transformed, WithMaterial, cosine_palette, default_material, light_vector_key)
 from .parse import parse
 from .resources import resource_dir
-from .stdlib import AUTO_SCALE, COLORINGS, COMBINATORS, MATH, TRANSFORMS, Parameter, Signature, library
-from .write import TONE_CURVES
+from .stdlib import AUTO_SCALE, COLORINGS, COMBINATORS, MATH, TRANSFORMS, Signature, library
+from .types import (FLOAT_MAX, TYPE_WORDS, VECTOR_TYPES, Parameter, Type, above, at_most, between, in_float_range,
+                    keys_of, range_violation, vector_type)
 
-# The language's value types.
-NUM, SHAPE, MATERIAL, WORD, COLORING, FORMULA = "number", "shape", "material", "word", "coloring", "formula"
-def vec_type(n: int) -> str:
-    return f"vec{n}"
+NUM, SHAPE, MATERIAL, WORD, COLORING, FORMULA = Type.NUMBER, Type.SHAPE, Type.MATERIAL, Type.WORD, Type.COLORING, \
+    Type.FORMULA
 
 
 @dataclass(frozen=True)
 class Value:
-    type: str          # number | vec2..vec4 | shape | material | word | error
+    type: Type
     data: object       # ir.Expr | ir.Vec | Shape | material name | word
 
 
-_ERROR = Value("error", None)
+_ERROR = Value(Type.ERROR, None)
 
 # Parts (primitives, transforms, combinations) a scene may have, counting a
 # let each time it is used. The kernel's build time grows faster than its
@@ -52,22 +51,8 @@ MAX_SHAPES = 6000
 # check in 0.3-1.7 s and then build and render once in 7 s (100 steps),
 # 26 s (200), 64 s (400; benchmarks/hybrid_size.py); 1000 steps built for 84 s.
 MAX_HYBRID_STEPS = 256
-# The hit threshold's largest multiple: normals are differences over that
-# step, which beyond it can pass float's range on the scene (NaN normals).
-MAX_EPSILON_SCALE = 1000
 # Errors that get a "did you mean" (each costs time in the number of known names)
 SUGGESTED_ERRORS = 10
-# The largest float: a number beyond it is infinite in a float kernel
-FLOAT_MAX = 3.4028234663852886e38
-
-
-def in_float_range(x: float) -> bool:
-    return math.isfinite(x) and abs(x) <= FLOAT_MAX
-
-_TYPE_WORDS = {NUM: "a number", SHAPE: "a shape", MATERIAL: "a material", WORD: "a name", FORMULA: "a formula",
-               COLORING: "a colouring (orbit_trap)", "color": "a colour (r, g, b) or orbit_trap(...)",
-               "vec2": "a 2-vector", "vec3": "a 3-vector", "vec4": "a 4-vector",
-               "size": "a number or a 3-vector", "int": "a whole number", "rgb": "a colour (r, g, b)"}
 
 
 class _Failed(Exception):
@@ -136,9 +121,7 @@ class _Checker:
         for decl in decls:
             if isinstance(decl, ast.FormulaDecl) and names.get(decl.name) is decl.name_span:
                 self.declare_formula(decl)     # a file's formula replaces the library's of its name
-        self.materials[DEFAULT_MATERIAL] = Material(
-            DEFAULT_MATERIAL, ir.vec(*(ir.const(0.8) for _ in range(3))),
-            ir.const(0.3), ir.const(32.0), ir.const(0.0), ir.const(0.0), ir.const(1.5))
+        self.materials[DEFAULT_MATERIAL] = default_material()
         for name, decl in self.material_decls.items():
             self.materials[name] = self.material(decl)
         for name in self.lets:
@@ -151,9 +134,9 @@ class _Checker:
             self.error(Span(end, 1, end, 2), "the file has no 'scene' declaration (add e.g. 'scene sphere(1)')")
         else:
             value = self.evaluate(scene.shape)
-            if value.type not in (SHAPE, "error"):
+            if value.type not in (SHAPE, Type.ERROR):
                 hint = " (make it one with 'fractal(formula(...), iterations: N)')" if value.type == FORMULA else ""
-                self.error(scene.shape.span, f"'scene' needs a shape, this is {_TYPE_WORDS[value.type]}{hint}")
+                self.error(scene.shape.span, f"'scene' needs a shape, this is {TYPE_WORDS[value.type]}{hint}")
             shape = value.data
         camera = self.camera(singles.get(ast.CameraDecl))
         lights = tuple(self.light(d) for d in decls if isinstance(d, ast.LightDecl))
@@ -178,10 +161,10 @@ class _Checker:
             if None not in (low, high, default):
                 if low > high:
                     self.error(decl.bounds[0].span, f"the range [{low:g}, {high:g}] is empty")
-                elif not low <= default <= high:
-                    self.error(decl.default.span,
-                               f"'{decl.name}' = {default:g} is outside its range [{low:g}, {high:g}]")
-        self.params[decl.name] = ParamInfo(decl.name, len(self.params), default or 0.0, low, high, decl.span)
+        info = ParamInfo(decl.name, len(self.params), default or 0.0, low, high, decl.span)
+        if None not in (low, high, default) and low <= high and info.range_violation(default):
+            self.error(decl.default.span, info.range_violation(default))
+        self.params[decl.name] = info
 
     # ---- formulas ------------------------------------------------------------
 
@@ -203,8 +186,8 @@ class _Checker:
             seen.add(param.name)
             value = self.evaluate(param.default)
             items = value.data.items if isinstance(value.data, ir.Vec) else (value.data,)
-            if value.type not in (NUM, "vec3", "vec4") or not all(ir.is_const(x) for x in items):
-                if value.type != "error":
+            if value.type not in (NUM, Type.VEC3, Type.VEC4) or not all(ir.is_const(x) for x in items):
+                if value.type != Type.ERROR:
                     self.error(param.default.span, "a formula parameter's default must be a constant number "
                                                    "or a 3- or 4-vector")
                 return
@@ -220,14 +203,13 @@ class _Checker:
                 if value.type != NUM:
                     self.error(param.bounds[0].span, "a range is for a number parameter")
                     return
-                if not low <= items[0].value <= high:
-                    self.error(param.default.span, f"'{param.name}' = {items[0].value:g} is outside its range "
-                                                   f"[{low:g}, {high:g}]")
+                outside = range_violation(param.name, items[0].value, low, high)
+                if outside:
+                    self.error(param.default.span, outside)
                     return
-                constraints = (f"{low!r}..{high!r}",)
+                constraints = (between(low, high),)
             default = items[0].value if value.type == NUM else tuple(x.value for x in items)
-            parameters.append(Parameter(param.name, "num" if value.type == NUM else value.type, default,
-                                        constraints))
+            parameters.append(Parameter(param.name, value.type, default, constraints))
             defaults.append(value.data)
         try:
             formula = formula_code.split(decl, self.program.file)
@@ -264,11 +246,11 @@ class _Checker:
             if arg.name is not None:
                 self.fail(arg.span, "'hybrid' takes formulas in order, without names")
             value = self.value_of(arg.value)
-            if value.type == "error":
+            if value.type == Type.ERROR:
                 raise _Failed
             if value.type != FORMULA:
                 self.fail(arg.span, f"'hybrid' takes formulas (e.g. hybrid(bulb(8) * 2, amazing_box())), "
-                                    f"this is {_TYPE_WORDS[value.type]}")
+                                    f"this is {TYPE_WORDS[value.type]}")
             sequence.extend(value.data)
             self.require_hybrid_steps(sequence, arg.span)
         if not sequence:
@@ -293,7 +275,7 @@ class _Checker:
             self.fail(e.left.span, "this is a formula: make it a shape with 'fractal(formula(...), iterations: N)'")
         if e.op != "*" or count.type != NUM:
             self.fail(e.span, f"a formula can only be repeated: 'formula * count', not '{e.op}' "
-                              f"with {_TYPE_WORDS[count.type]}")
+                              f"with {TYPE_WORDS[count.type]}")
         n = count.data.value if ir.is_const(count.data) else None
         if n is None or n != math.floor(n) or not 1 <= n <= 100:
             self.fail(e.right.span, "a formula's repeat count must be a constant whole number from 1 to 100")
@@ -312,21 +294,21 @@ class _Checker:
     def fractal(self, e: ast.Call) -> Value:
         bound = self.bind(e, FORMULA_FORMS["fractal"], e.args)
         formula = bound["formula"][1]
-        if formula.type == "error":
+        if formula.type == Type.ERROR:
             raise _Failed
         if formula.type != FORMULA:
             if formula.type == WORD:
                 self.unknown_name(bound["formula"][0].value.span, formula.data)
             self.fail(bound["formula"][0].value.span, f"'fractal' needs a formula (declared with 'formula "
-                                                      f"name(...) {{ ... }}'), this is {_TYPE_WORDS[formula.type]}")
+                                                      f"name(...) {{ ... }}'), this is {TYPE_WORDS[formula.type]}")
         values = {}
         for p in FORMULA_FORMS["fractal"].parameters[1:]:
             if p.name not in bound:
                 values[p.name] = _default(p) if p.name in ("iterations", "step") else None
                 continue
             arg, value = bound[p.name]
-            if p.name == "julia" and value.type == "vec4":
-                p = replace(p, type="vec4")
+            if p.name == "julia" and value.type == Type.VEC4:
+                p = replace(p, type=Type.VEC4)
             values[p.name] = self.convert(arg.value.span, value, p, "fractal")
         # the estimate's kind from |z|'s growth at the params' defaults and range ends
         params = tuple(self.params.values())
@@ -348,7 +330,7 @@ class _Checker:
 
     def constant_number(self, expr: ast.Expr, what: str) -> float | None:
         value = self.evaluate(expr)
-        if value.type == "error":
+        if value.type == Type.ERROR:
             return None
         if value.type != NUM or not ir.is_const(value.data):
             self.error(expr.span, f"{what} must be a constant number")
@@ -417,17 +399,17 @@ class _Checker:
             return self.name(e)
         if isinstance(e, ast.Vector):
             items = [self._evaluate(x) for x in e.items]
-            if any(v.type == "error" for v in items):
+            if any(v.type == Type.ERROR for v in items):
                 return _ERROR
             for item, v in zip(e.items, items):
                 if v.type != NUM:
-                    self.fail(item.span, f"a vector's components must be numbers, this is {_TYPE_WORDS[v.type]}")
+                    self.fail(item.span, f"a vector's components must be numbers, this is {TYPE_WORDS[v.type]}")
             if len(items) > 4:
                 self.fail(e.span, f"vectors have 2 to 4 components, this one has {len(items)}")
-            return Value(vec_type(len(items)), ir.Vec(tuple(v.data for v in items)))
+            return Value(vector_type(len(items)), ir.Vec(tuple(v.data for v in items)))
         if isinstance(e, ast.Unary):
             operand = self._evaluate(e.operand)
-            if operand.type == "error":
+            if operand.type == Type.ERROR:
                 return _ERROR
             if operand.type == SHAPE:
                 self.fail(e.span, "a shape cannot be negated (to cut one shape from another use 'a - b')")
@@ -480,7 +462,7 @@ class _Checker:
 
     def binary(self, e: ast.Binary) -> Value:
         left, right = self.value_of(e.left), self.value_of(e.right)
-        if "error" in (left.type, right.type):
+        if Type.ERROR in (left.type, right.type):
             return _ERROR
         if left.type == FORMULA:
             return self.repeated(e, left, right)
@@ -493,10 +475,10 @@ class _Checker:
         if left.type == SHAPE and right.type == SHAPE:
             if e.op != "-":
                 self.fail(e.span, f"'{e.op}' does not combine shapes: use '|' (union), '&' (intersect) or '-' (subtract)")
-            return self.shape(Combination("subtract", (left.data, right.data), ir.const(0.0), e.span))
+            return self.shape(Combination(CombinationKind.SUBTRACT, (left.data, right.data), ir.const(0.0), e.span))
         if SHAPE in (left.type, right.type):
             other = right if left.type == SHAPE else left
-            self.fail(e.span, f"'{e.op}' needs two shapes or two numbers/vectors, not a shape and {_TYPE_WORDS[other.type]}")
+            self.fail(e.span, f"'{e.op}' needs two shapes or two numbers/vectors, not a shape and {TYPE_WORDS[other.type]}")
         return self.arithmetic(e, e.op, [left, right])
 
     def chain(self, e: ast.Chain) -> Value:
@@ -505,21 +487,21 @@ class _Checker:
         shapes = []
         for operand in e.operands:
             value = self.value_of(operand)
-            if value.type == "error":
+            if value.type == Type.ERROR:
                 raise _Failed
             if value.type != SHAPE:
                 self.fail(operand.span, "this is a formula: make it a shape with 'fractal(formula(...), iterations: N)'"
                           if value.type == FORMULA else
                           f"'{e.op}' combines shapes ({'union' if e.op == '|' else 'intersection'}), "
-                          f"this is {_TYPE_WORDS[value.type]}")
+                          f"this is {TYPE_WORDS[value.type]}")
             shapes.append(value.data)
-        return self.shape(Combination("union" if e.op == "|" else "intersect", tuple(shapes), ir.const(0.0), e.span))
+        return self.shape(Combination(CombinationKind.UNION if e.op == "|" else CombinationKind.INTERSECT, tuple(shapes), ir.const(0.0), e.span))
 
     def arithmetic(self, e, op: str, operands: list[Value], mode: str = "map") -> Value:
         """Component-wise arithmetic on numbers and vectors; numbers broadcast."""
         for operand in operands:
-            if operand.type not in (NUM, "vec2", "vec3", "vec4"):
-                self.fail(e.span, f"'{op}' needs numbers or vectors, not {_TYPE_WORDS[operand.type]}")
+            if operand.type not in (NUM, *VECTOR_TYPES):
+                self.fail(e.span, f"'{op}' needs numbers or vectors, not {TYPE_WORDS[operand.type]}")
         sizes = {len(o.data) for o in operands if o.type != NUM}
         if len(sizes) > 1:
             self.fail(e.span, f"'{op}' on vectors of different sizes ({', '.join(map(str, sorted(sizes)))})")
@@ -534,7 +516,7 @@ class _Checker:
                 self.fail(e.span, f"'{op}' gives {item.value:.3g}, beyond the kernel's floats ({FLOAT_MAX:.3g})")
         if size == 0:
             return Value(NUM, items[0])
-        return Value(vec_type(size), ir.Vec(items))
+        return Value(vector_type(size), ir.Vec(items))
 
     # ---- calls -------------------------------------------------------------
 
@@ -566,28 +548,25 @@ class _Checker:
 
     def convert(self, span: Span, value: Value, param: Parameter, owner: str):
         """An argument value as the parameter's type (ir.Expr or ir.Vec)."""
-        if value.type == "error":
+        if value.type == Type.ERROR:
             raise _Failed
         want = param.type
-        if want.startswith("word:"):
-            choices = want[5:].split("|")
-            if value.type == WORD and value.data in choices:
-                return value.data
-            self.fail(span, f"'{param.name}' of '{owner}' must be one of {', '.join(choices)}")
-        if want == "color" and value.type == COLORING:
+        if want is Type.WORD:
+            if value.type == WORD and value.data in param.words:
+                return param.word(value.data)
+            self.fail(span, f"'{param.name}' of '{owner}' must be one of {', '.join(param.words)}")
+        if want is Type.COLOR and value.type == COLORING:
             return value.data
-        ok = {"num": (NUM,), "int": (NUM,), "vec3": ("vec3",), "vec4": ("vec4",), "color": ("vec3",),
-              "size": (NUM, "vec3"), "material": (MATERIAL,), "shape": (SHAPE,)}[want]
-        if value.type not in ok:
-            word = _TYPE_WORDS.get(want if want != "num" else NUM)
-            if value.type == WORD and want != "material":
+        if value.type not in _ACCEPTED[want]:
+            word = TYPE_WORDS.get(want)
+            if value.type == WORD and want is not Type.MATERIAL:
                 self.unknown_name(span, value.data)
             if value.type == WORD:
                 hint = self.did_you_mean(value.data, self.material_decls)
                 self.fail(span, f"unknown material '{value.data}'{hint}")
-            self.fail(span, f"'{param.name}' of '{owner}' needs {word}, this is {_TYPE_WORDS[value.type]}")
+            self.fail(span, f"'{param.name}' of '{owner}' needs {word}, this is {TYPE_WORDS[value.type]}")
         data = value.data
-        if want == "size" and value.type == NUM:
+        if want is Type.SIZE and value.type == NUM:
             data = ir.vec(data, data, data)
         self.check_constraints(span, data, param, owner)
         return data
@@ -599,32 +578,12 @@ class _Checker:
         subject = f"'{param.name}' of '{owner}'" if subject is None else subject
         items = data.items if isinstance(data, ir.Vec) else (data,)
         if not all(isinstance(x, ir.Const) for x in items):
-            if (param.constraints or param.type == "int") and others is None:
+            if (param.constraints or param.type is Type.WHOLE) and others is None:
                 self.param_checks.append(ParamCheck(span, data, param, owner))
             return   # depends on a param: checked for each set of param values
-        values = [x.value for x in items]
-        shown = _number_text(values[0]) if len(values) == 1 else "(" + ", ".join(f"{v:g}" for v in values) + ")"
-        if param.type == "int" and any(v != math.floor(v) for v in values):
-            self.fail(span, f"{subject} must be a whole number, not {shown}".lstrip())
-        for c in param.constraints:
-            if c == "nonzero":
-                ok, says = any(v != 0 for v in values), "must not be zero"
-            elif ".." in c:
-                lo, hi = (float(x) for x in c.split(".."))
-                ok, says = all(lo <= v <= hi for v in values), f"must be between {_number_text(lo)} and {_number_text(hi)}"
-            else:
-                opname, bound = c[:2] if c[1] == "=" else c[0], c[2:] if c[1] == "=" else c[1:]
-                if bound[0].isalpha():
-                    if not others or bound not in others:
-                        continue
-                    limit, bound_text = others[bound], f"'{bound}' ({others[bound]:g})"
-                else:
-                    limit, bound_text = float(bound), _number_text(float(bound))
-                test = {">": float.__gt__, ">=": float.__ge__, "<": float.__lt__, "<=": float.__le__}[opname]
-                ok = all(test(v, limit) for v in values)
-                says = f"must be {'greater than' if opname == '>' else 'at least' if opname == '>=' else 'less than' if opname == '<' else 'at most'} {bound_text}"
-            if not ok:
-                self.fail(span, f"{subject} {says}, not {shown}".lstrip())
+        says = param.violation([x.value for x in items], others)
+        if says:
+            self.fail(span, f"{subject} {says}".lstrip())
 
     def bound_args(self, e, signature: Signature, args) -> tuple:
         bound = self.bind(e, signature, args)
@@ -644,17 +603,17 @@ class _Checker:
         scalars = {k: v for k, v in converted.items() if isinstance(v, (ir.Const, ir.Param, ir.Op))}
         for p in signature.parameters:
             # constraints between arguments, e.g. min_radius <= fixed_radius
-            related = tuple(c for c in p.constraints if c[:2] in ("<=", ">=") and c[2:3].isalpha())
+            related = tuple(c for c in p.constraints if getattr(c, "relative", False))
             if not related or p.name not in scalars:
                 continue
-            between = replace(p, constraints=related)
+            relation = replace(p, constraints=related)
             span = bound[p.name][0].value.span if p.name in bound else e.span
-            others = {c[2:]: scalars[c[2:]] for c in related if c[2:] in scalars}
+            others = {c.limit: scalars[c.limit] for c in related if c.limit in scalars}
             if all(ir.is_const(x) for x in (scalars[p.name], *others.values())):
-                self.check_constraints(span, scalars[p.name], between, signature.name,
+                self.check_constraints(span, scalars[p.name], relation, signature.name,
                                        {k: v.value for k, v in others.items()})
             else:
-                self.param_checks.append(ParamCheck(span, scalars[p.name], between, signature.name, others))
+                self.param_checks.append(ParamCheck(span, scalars[p.name], relation, signature.name, others))
         return tuple(converted[p.name] for p in signature.parameters)
 
     def call(self, e: ast.Call) -> Value:
@@ -688,9 +647,9 @@ class _Checker:
         options = tuple(a for a in e.args if a.name is not None)
         values = [self.value_of(a.value) for a in shapes]
         for arg, value in zip(shapes, values):
-            if value.type not in (SHAPE, "error"):
-                self.fail(arg.span, f"'{e.name}' combines shapes, this is {_TYPE_WORDS[value.type]}")
-        if any(v.type == "error" for v in values):
+            if value.type not in (SHAPE, Type.ERROR):
+                self.fail(arg.span, f"'{e.name}' combines shapes, this is {TYPE_WORDS[value.type]}")
+        if any(v.type == Type.ERROR for v in values):
             raise _Failed
         need = 2
         if len(values) < need:
@@ -698,24 +657,25 @@ class _Checker:
         if e.name == "subtract" and len(values) != 2:
             self.fail(e.span, f"'subtract' takes exactly 2 shapes (a with b cut away), not {len(values)}")
         (smooth,) = self.bound_args(e, signature, options)
-        return self.shape(Combination(e.name, tuple(v.data for v in values), smooth, e.span))
+        return self.shape(Combination(CombinationKind(e.name), tuple(v.data for v in values), smooth, e.span))
 
     def math(self, e: ast.Call) -> Value:
-        arity, mode = MATH[e.name]
+        function = MATH[e.name]
+        arity = len(function.arguments)
         if any(a.name is not None for a in e.args):
             named = next(a for a in e.args if a.name is not None)
             self.fail(named.span, f"'{e.name}' takes positional arguments only")
         if len(e.args) != arity:
             self.fail(e.span, f"'{e.name}' takes {arity} argument{'s' if arity > 1 else ''}, not {len(e.args)}")
         values = [self.value_of(a.value) for a in e.args]
-        if any(v.type == "error" for v in values):
+        if any(v.type == Type.ERROR for v in values):
             raise _Failed
-        if mode == "map":
+        if function.per_component:
             return self.arithmetic(e, e.name, values)
-        for arg, v in zip(e.args, values):
-            if v.type not in ("vec2", "vec3", "vec4") or (mode.startswith("vec3") and v.type != "vec3"):
-                want = "a 3-vector" if mode.startswith("vec3") else "a vector"
-                self.fail(arg.span, f"'{e.name}' needs {want}, this is {_TYPE_WORDS[v.type]}")
+        for arg, want, v in zip(e.args, function.arguments, values):
+            if v.type not in VECTOR_TYPES or (want == "3" and v.type != Type.VEC3):
+                self.fail(arg.span, f"'{e.name}' needs {'a 3-vector' if want == '3' else 'a vector'}, "
+                                    f"this is {TYPE_WORDS[v.type]}")
         if len(values) == 2 and len(values[0].data) != len(values[1].data):
             self.fail(e.span, f"'{e.name}' on vectors of different sizes")
         try:
@@ -726,29 +686,29 @@ class _Checker:
     def field(self, e: ast.Field) -> Value:
         """`v.x`, `v.xy`: components of a vector."""
         receiver = self.value_of(e.receiver)
-        if receiver.type == "error":
+        if receiver.type == Type.ERROR:
             raise _Failed
-        if receiver.type not in ("vec2", "vec3", "vec4"):
-            self.fail(e.span, f"'.{e.name}' takes components of a vector, this is {_TYPE_WORDS[receiver.type]}")
+        if receiver.type not in VECTOR_TYPES:
+            self.fail(e.span, f"'.{e.name}' takes components of a vector, this is {TYPE_WORDS[receiver.type]}")
         names = "xyzw"[:len(receiver.data)]
         if len(e.name) > 4 or any(ch not in names for ch in e.name):
-            self.fail(e.name_span, f"'.{e.name}' is not a component of {_TYPE_WORDS[receiver.type]} "
+            self.fail(e.name_span, f"'.{e.name}' is not a component of {TYPE_WORDS[receiver.type]} "
                                    f"(components: {', '.join(names)})")
         items = tuple(receiver.data.items[names.index(ch)] for ch in e.name)
-        return Value(NUM, items[0]) if len(items) == 1 else Value(vec_type(len(items)), ir.Vec(items))
+        return Value(NUM, items[0]) if len(items) == 1 else Value(vector_type(len(items)), ir.Vec(items))
 
     def method(self, e: ast.Method) -> Value:
         if isinstance(e.receiver, ast.Name) and e.receiver.name == LIBRARY and not any(
                 LIBRARY in names for names in (self.params, self.lets, self.material_decls)):
             return self.library_formula(e)
         receiver = self.value_of(e.receiver)
-        if receiver.type == "error":
+        if receiver.type == Type.ERROR:
             raise _Failed
         signature = TRANSFORMS.get(e.name)
         if signature is None:
             self.fail(e.name_span, f"unknown transform '.{e.name}'{self.did_you_mean(e.name, TRANSFORMS)}")
         if receiver.type != SHAPE:
-            self.fail(e.name_span, f"'.{e.name}' transforms a shape, this is {_TYPE_WORDS[receiver.type]}")
+            self.fail(e.name_span, f"'.{e.name}' transforms a shape, this is {TYPE_WORDS[receiver.type]}")
         args = self.bound_args(e, signature, e.args)
         if e.name == "material":
             return self.shape(WithMaterial(receiver.data, args[0], e.span))
@@ -805,24 +765,23 @@ class _Checker:
                     (f" (known: {', '.join(keys)})" if len(keys) <= len(RENDER_KEYS) else "")
                 self.error(entry.key_span, f"'{owner}' has no key '{entry.key}'{hint}")
                 continue
-            nested = BLOCK_KEYS.get(param.type)
-            if isinstance(entry.value, ast.Block) != bool(nested):
+            nested = param.type is Type.BLOCK
+            if isinstance(entry.value, ast.Block) != nested:
                 self.error(entry.value.span, f"'{entry.key}' takes a block {{ ... }}" if nested
                            else f"'{entry.key}' takes a value, not a block")
                 continue
             if nested:
-                keys_type, defaults = nested
-                values = self.entries(entry.value, keys_type, entry.key)
-                found[entry.key] = replace(defaults, **values)
+                values = self.entries(entry.value, keys_of(param.block), entry.key)
+                found[entry.key] = param.block(**values)
                 continue
-            if isinstance(entry.value, ast.String) != (param.type == "file"):
+            is_file = param.type is Type.FILE
+            if isinstance(entry.value, ast.String) != is_file:
                 self.error(entry.value.span, f"'{entry.key}' takes a file name in quotes, such as \"sky.exr\""
-                           if param.type == "file" else f"'{entry.key}' takes a value, not a string "
-                                                        f"(strings are file names: environment's 'map')")
+                           if is_file else f"'{entry.key}' takes a value, not a string "
+                                           f"(strings are file names: environment's 'map')")
                 continue
             try:
-                found[entry.key] = self.file(entry.value) if param.type == "file" \
-                    else self.entry_value(entry, param, owner)
+                found[entry.key] = self.file(entry.value) if is_file else self.entry_value(entry, param, owner)
             except _Failed:
                 pass
         return found
@@ -847,16 +806,13 @@ class _Checker:
 
     def entry_value(self, entry: ast.Entry, param: Parameter, owner: str):
         value = self._evaluate(entry.value)
-        if param.type.startswith("word:"):
-            choices = param.type[5:].split("|")
-            other = _word_alternative(choices)     # a number or a vector where no word is given
-            if value.type == WORD and value.data in choices:
-                return value.data
-            if not (other and value.type == _WORD_ALTERNATIVES[other]):
-                listed = " or ".join(f"'{c}'" if c not in _WORD_ALTERNATIVES
-                                     else _TYPE_WORDS[_WORD_ALTERNATIVES[c]] for c in choices)
+        if param.words:
+            if value.type == WORD and value.data in param.words:
+                return param.word(value.data)
+            if param.type is Type.WORD or value.type != param.type:   # not the value given instead of a word
+                listed = " or ".join([f"'{c}'" for c in param.words] + [TYPE_WORDS[param.type]] * (
+                    param.type is not Type.WORD))
                 self.fail(entry.value.span, f"'{entry.key}' must be {listed}")
-            param = _P(param.name, other, None, *param.constraints)
         data = self.convert(entry.value.span, value, param, owner)
         if owner == "material":
             return data
@@ -864,37 +820,28 @@ class _Checker:
         if not all(isinstance(x, ir.Const) for x in items):
             self.fail(entry.value.span, f"'{entry.key}' must be a constant (it depends on a param)")
         values = tuple(x.value for x in items)
-        return values if isinstance(data, ir.Vec) else (int(values[0]) if param.type == "int" else values[0])
+        return values if isinstance(data, ir.Vec) else (int(values[0]) if param.type is Type.WHOLE else values[0])
 
     def material(self, decl: ast.MaterialDecl) -> Material:
         found = self.entries(decl.block, MATERIAL_KEYS, "material")
-        default = self.materials[DEFAULT_MATERIAL]
-        return Material(decl.name, found.get("color", default.color),
-                        found.get("specular", default.specular),
-                        found.get("shininess", default.shininess),
-                        found.get("reflectivity", default.reflectivity),
-                        found.get("transparency", default.transparency),
-                        found.get("ior", default.ior))
+        return replace(self.materials[DEFAULT_MATERIAL], name=decl.name, **found)
 
     def camera(self, decl: ast.CameraDecl | None) -> Camera:
         errors_before = len(self.errors)
         found = self.entries(decl.block if decl else None, CAMERA_KEYS, "camera")
         camera = Camera(**found)
-        forward = [t - p for t, p in zip(camera.target, camera.position)]
         if len(self.errors) > errors_before:
             return camera
-        if _norm(forward) == 0:
-            where = next((x.value.span for x in decl.block.entries if x.key == "target"), decl.span)
-            self.error(where, "the camera's target is its position: it looks nowhere")
-        elif _norm(_cross(forward, camera.up)) <= 1e-9 * _norm(forward) * _norm(camera.up):
-            entry = next((x for x in decl.block.entries if x.key == "up"), None)
-            if entry is None:   # looking straight along the default up: y is up instead
-                return replace(camera, up=(0.0, 1.0, 0.0))
-            self.error(entry.value.span, "the camera's 'up' is parallel to its view direction (target - position)")
+        try:
+            return camera.aimed(up_given="up" in found)
+        except ValueError as error:
+            at_fault = camera.aim_problem()[0]
+            where = next((x.value.span for x in decl.block.entries if x.key == at_fault), decl.span)
+            self.error(where, str(error))
         return camera
 
     def light(self, decl: ast.LightDecl) -> Light | None:
-        keys = LIGHT_KEYS.get(decl.kind)
+        keys = LIGHT_KEYS.get(decl.kind)     # the kind as a word: a LightKind is equal to its word
         if keys is None:
             self.error(decl.kind_span, f"unknown light kind '{decl.kind}' (known: {', '.join(LIGHT_KEYS)})")
             return None
@@ -921,9 +868,10 @@ class _Checker:
                 self.error(given["target"].value.span, f"the {decl.kind} light's target is its position: "
                                                         f"it faces nowhere")
                 return None
-        if decl.kind in ("sphere", "rectangle"):    # the direct renderer's stand-in for their soft shadows
-            found.setdefault("shadows", "soft")
-        return Light(decl.kind, vector, **found)
+        kind = LightKind(decl.kind)
+        if kind in (LightKind.SPHERE, LightKind.RECTANGLE):    # the direct renderer's stand-in for their soft shadows
+            found.setdefault("shadows", Shadows.SOFT)
+        return Light(kind, vector, **found)
 
     def render(self, decl: ast.RenderDecl | None) -> RenderSettings:
         found = self.entries(decl.block if decl else None, RENDER_KEYS, "render")
@@ -941,8 +889,8 @@ class _Checker:
         # the camera keys a path animates (a projection and stereo layout are the block's)
         animated = [key for key in CAMERA_KEYS if key in Keyframe.__dataclass_fields__]
         keys = {key: CAMERA_KEYS[key] for key in animated}
-        for name, key in self.param_keys().items():
-            keys.setdefault(name, key)
+        for name, info in self.params.items():
+            keys.setdefault(name, info.as_key())
         keyframes = []
         for before, frame in zip((None,) + decl.keyframes, decl.keyframes):
             if not in_float_range(frame.time):
@@ -964,19 +912,10 @@ class _Checker:
             self.error(decl.span, f"a path needs at least two keyframes, this one has {len(decl.keyframes)}")
         return CameraPath(tuple(keyframes), decl.span)
 
-    def param_keys(self) -> dict[str, Parameter]:
-        """The params as block keys (a path's keyframes, presets): a
-        constant number in the param's range."""
-        keys = {}
-        for name, info in self.params.items():
-            in_range = (f"{info.low!r}..{info.high!r}",) if None not in (info.low, info.high) else ()
-            keys[name] = _P(name, "num", None, *in_range)
-        return keys
-
     def presets(self, decls: list[ast.PresetDecl]) -> tuple[Preset, ...]:
         """Each `preset NAME { param: value, ... }`: constant values of
         params, in their ranges; one preset of each name."""
-        keys, found = self.param_keys(), {}
+        keys, found = {name: info.as_key() for name, info in self.params.items()}, {}
         for decl in decls:
             if decl.name in found:
                 first = found[decl.name].span
@@ -1005,17 +944,9 @@ def _default(p: Parameter):
         return p.default
     if isinstance(p.default, tuple):
         return ir.Vec(tuple(ir.const(x) for x in p.default))
-    if p.type == "size":
+    if p.type is Type.SIZE:
         return ir.vec(*(ir.const(p.default),) * 3)
     return ir.const(p.default)
-
-
-def _norm(v) -> float:
-    return math.sqrt(sum(x * x for x in v))
-
-
-def _cross(a, b):
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
 def _vector_math(name: str, vectors: list[ir.Vec]) -> Value:
@@ -1033,72 +964,17 @@ def _vector_math(name: str, vectors: list[ir.Vec]) -> Value:
         return Value(NUM, dot(a, vectors[1].items))
     if name == "normalize":
         length = ir.op("sqrt", dot(a, a))
-        return Value(vec_type(len(a)), ir.Vec(tuple(ir.div(x, length) for x in a)))
+        return Value(vector_type(len(a)), ir.Vec(tuple(ir.div(x, length) for x in a)))
     b = vectors[1].items
-    return Value("vec3", ir.vec(ir.sub(ir.mul(a[1], b[2]), ir.mul(a[2], b[1])),
+    return Value(Type.VEC3, ir.vec(ir.sub(ir.mul(a[1], b[2]), ir.mul(a[2], b[1])),
                                 ir.sub(ir.mul(a[2], b[0]), ir.mul(a[0], b[2])),
                                 ir.sub(ir.mul(a[0], b[1]), ir.mul(a[1], b[0]))))
 
 
-_WORD_ALTERNATIVES = {"num": NUM, "vec3": "vec3"}   # parameter type: its values' type
-
-
-def _word_alternative(choices) -> str | None:
-    """The type a `word:...|num` or `word:...|vec3` key takes besides its words."""
-    return next((c for c in choices if c in _WORD_ALTERNATIVES), None)
-
-
-def _keys(*params: Parameter) -> dict[str, Parameter]:
-    return {p.name: p for p in params}
-
-
-def _P(name: str, type_: str, default=None, *constraints: str) -> Parameter:
-    return Parameter(name, type_, default, constraints)
-
-
-MATERIAL_KEYS = _keys(_P("color", "vec3", None, "0..1000"), _P("specular", "num", None, "0..1"),
-                      _P("shininess", "num", None, ">0"), _P("reflectivity", "num", None, "0..1"),
-                      _P("transparency", "num", None, "0..1"), _P("ior", "num", None, "1..10"))
-CAMERA_KEYS = _keys(_P("position", "vec3"), _P("target", "vec3"), _P("up", "vec3", None, "nonzero"),
-                    _P("fov", "num", None, ">0", "<180"), _P("aperture", "num", None, ">=0"),
-                    _P("focus", "num", None, ">0"), _P("projection", f"word:{'|'.join(PROJECTIONS)}"),
-                    _P("fisheye_fov", "num", None, ">0", "<=360"),
-                    _P("stereo", f"word:{'|'.join(STEREO_LAYOUTS)}"), _P("eye_separation", "num", None, ">=0"))
-_LIGHT_COMMON = (_P("color", "vec3", None, ">=0"), _P("intensity", "num", None, ">=0"),
-                 _P("shadows", "word:none|hard|soft"), _P("softness", "num", None, ">0"))
-LIGHT_KEYS = {"directional": _keys(_P("direction", "vec3", None, "nonzero"), *_LIGHT_COMMON),
-              "point": _keys(_P("position", "vec3"), *_LIGHT_COMMON),
-              "spot": _keys(_P("position", "vec3"), _P("direction", "vec3", None, "nonzero"), _P("target", "vec3"),
-                            *_LIGHT_COMMON, _P("angle", "num", None, ">0", "<180"),
-                            _P("falloff", "num", None, ">=0", "<=180")),
-              "sphere": _keys(_P("position", "vec3"), _P("radius", "num", None, ">0"), *_LIGHT_COMMON),
-              "rectangle": _keys(_P("position", "vec3"), _P("direction", "vec3", None, "nonzero"),
-                                 _P("target", "vec3"), _P("width", "num", None, ">0"), _P("height", "num", None, ">0"),
-                                 *_LIGHT_COMMON)}
-BLOCK_KEYS = {
-    "block:glow": (_keys(_P("color", "vec3", None, ">=0"), _P("strength", "num", None, ">=0"),
-                         _P("radius", "num", None, ">0")), Glow()),
-    "block:fog": (_keys(_P("color", "vec3", None, ">=0"), _P("density", "num", None, ">=0")), Fog()),
-    "block:slice": (_keys(_P("normal", "vec3", None, "nonzero"), _P("offset", "num")), Slice()),
-    "block:environment": (_keys(_P("zenith", "vec3", None, ">=0"), _P("horizon", "vec3", None, ">=0"),
-                                _P("ground", "vec3", None, ">=0"), _P("intensity", "num", None, ">=0"),
-                                _P("map", "file")),
-                          Environment()),
-}
-RENDER_KEYS = _keys(
-    _P("width", "int", None, ">=1", "<=65536"), _P("height", "int", None, ">=1", "<=65536"),
-    _P("max_steps", "int", None, "1..100000"), _P("max_distance", "num", None, ">0"),
-    _P("epsilon", "word:pixel|num", None, ">0"), _P("ao", "num", None, "0..1"),
-    _P("samples", "int", None, ">=1", "<=4096"), _P("background", "word:transparent|vec3", None, ">=0"),
-    _P("precision", "word:float|double"), _P("reflections", "int", None, "0..16"),
-    _P("glow", "block:glow"), _P("fog", "block:fog"), _P("slice", "block:slice"),
-    _P("ao_method", "word:normal|steps"), _P("dither", "num", None, "0..1"),
-    _P("overrelax", "num", None, "1..1.99"), _P("cone_marching", "word:on|off"),
-    _P("epsilon_scale", "num", None, ">0", f"<={MAX_EPSILON_SCALE:g}"),
-    _P("normals", "word:tetrahedral|central|forward"), _P("fast_math", "word:auto|on|off"),
-    _P("exposure", "num", None, "-20..20"), _P("tonemap", "word:" + "|".join(TONE_CURVES)),
-    _P("integrator", "word:direct|path"), _P("bounces", "int", None, "1..64"),
-    _P("environment", "block:environment"))
+# What a value of each parameter type may be
+_ACCEPTED = {Type.NUMBER: (NUM,), Type.WHOLE: (NUM,), Type.VEC3: (Type.VEC3,), Type.VEC4: (Type.VEC4,),
+             Type.COLOR: (Type.VEC3,), Type.SIZE: (NUM, Type.VEC3), Type.MATERIAL: (MATERIAL,),
+             Type.SHAPE: (SHAPE,)}
 
 
 # The vector keys that are colours (r, g, b): what a colour picker sets.
@@ -1141,26 +1017,16 @@ def key_specs(block: str) -> tuple[KeySpec, ...]:
 
 
 def _key_spec(parameter: Parameter) -> KeySpec:
-    if parameter.type in BLOCK_KEYS:
-        nested = BLOCK_KEYS[parameter.type][0]
-        return KeySpec(parameter.name, KeyKind.BLOCK, keys=tuple(_key_spec(p) for p in nested.values()))
-    if parameter.type == "file":
+    if parameter.type is Type.BLOCK:
+        return KeySpec(parameter.name, KeyKind.BLOCK,
+                       keys=tuple(_key_spec(p) for p in keys_of(parameter.block).values()))
+    if parameter.type is Type.FILE:
         return KeySpec(parameter.name, KeyKind.FILE)
-    words, other = (), parameter.type
-    if parameter.type.startswith("word:"):
-        words = tuple(c for c in parameter.type[5:].split("|") if c not in _WORD_ALTERNATIVES)
-        other = _word_alternative(parameter.type[5:].split("|"))
-    kind = {None: KeyKind.WORD, "int": KeyKind.WHOLE, "vec3": KeyKind.VECTOR}.get(other, KeyKind.NUMBER)
-    bounds: dict = {}
-    for c in parameter.constraints:
-        if ".." in c:
-            bounds["low"], bounds["high"] = (float(x) for x in c.split(".."))
-        elif c[0] in "<>" and not c.lstrip("<>=")[:1].isalpha():    # not a bound by another argument
-            side = "low" if c[0] == ">" else "high"
-            bounds[side] = float(c.lstrip("<>="))
-            bounds[f"{side}_excluded"] = c[1] != "="
-    return KeySpec(parameter.name, kind, words, colour=kind is KeyKind.VECTOR and parameter.name in COLOUR_KEYS,
-                   **bounds)
+    kind = {Type.WORD: KeyKind.WORD, Type.WHOLE: KeyKind.WHOLE, Type.VEC3: KeyKind.VECTOR}.get(
+        parameter.type, KeyKind.NUMBER)
+    low, high, low_excluded, high_excluded = parameter.range
+    return KeySpec(parameter.name, kind, tuple(str(w) for w in parameter.words), low, high, low_excluded,
+                   high_excluded, colour=kind is KeyKind.VECTOR and parameter.name in COLOUR_KEYS)
 
 
 # `fractal(formula, ...)`: the shape of a formula (docs/formulas.md). The
@@ -1168,8 +1034,9 @@ def _key_spec(parameter: Parameter) -> KeySpec:
 # the estimate's kind: formula_code.orbit).
 FORMULA_FORMS = {
     "fractal": Signature("fractal", "fractal", (
-        _P("formula", "formula"), _P("iterations", "int", 12.0, "1..1000"), _P("bailout", "num", 0.0, ">0"),
-        _P("julia", "vec3", 0.0), _P("bound", "num", 0.0, ">0"), _P("step", "num", 1.0, ">0", "<=1"))),
+        Parameter("formula", Type.FORMULA), Parameter("iterations", Type.WHOLE, 12.0, (between(1, 1000),)),
+        Parameter("bailout", NUM, 0.0, (above(0),)), Parameter("julia", Type.VEC3, 0.0),
+        Parameter("bound", NUM, 0.0, (above(0),)), Parameter("step", NUM, 1.0, (above(0), at_most(1))))),
     "hybrid": Signature("fractal", "hybrid", ()),
 }
 # `library.NAME(...)` names the library's formula NAME (unless the file
@@ -1216,89 +1083,78 @@ def check(program: ast.Program) -> CheckedScene:
     return _Checker(program).run()
 
 
-def _number_text(number: float) -> str:
-    """A number in a message: whole numbers in full (4294967295, not 4.29497e+09)."""
-    return str(int(number)) if number.is_integer() and abs(number) < 1e16 else f"{number:g}"
-
-
 def check_value(param: Parameter, key: str, value, subject: str | None = None):
     """Validate a render setting given from Python or the command line
     (type and range, as in a file); raise ValueError saying what is wrong,
     of `subject` (default: `'key' of 'render'`; '': none). A number is a
     Python or numpy number, never a string or a bool."""
-    checker = _Checker(ast.Program((), "<arguments>", ""))
     named = repr(key) if subject is None else subject
 
     def wrong(says: str) -> ValueError:
         return ValueError(f"{named} {says}".lstrip())
-    if param.type == "file":
+    if param.type is Type.FILE:
         if value is not None:
             raise ValueError(f"'{key}' is a scene file's key: from Python give environment_map=FILE "
                              f"(on the command line, --environment-map FILE)")
         return None
-    if param.type in BLOCK_KEYS:
-        keys, defaults = BLOCK_KEYS[param.type]
+    if param.type is Type.BLOCK:
+        keys = keys_of(param.block)
         if value is False:
             return None                                  # the effect off
-        if isinstance(value, type(defaults)):
+        if isinstance(value, param.block):
             value = {f: getattr(value, f) for f in keys}
         if not isinstance(value, dict):
             raise wrong(f"must be a dict of {', '.join(keys)} (or False for off)")
         unknown = set(value) - set(keys)
         if unknown:
             raise wrong(f"has no key '{sorted(unknown)[0]}' (known: {', '.join(keys)})")
-        return replace(defaults, **{k: check_value(keys[k], f"{key}.{k}", v) for k, v in value.items()})
-    choices = param.type[5:].split("|") if param.type.startswith("word:") else ()
-    if isinstance(value, str) and value in choices:
-        return value
-    other = _word_alternative(choices) if choices else param.type
-    if other is None:
-        raise wrong(f"must be {' or '.join(repr(c) for c in choices)}, not {value!r}")
-    is_vector = other == "vec3"
+        return param.block(**{k: check_value(keys[k], f"{key}.{k}", v) for k, v in value.items()})
+    word = param.word(value)
+    if word is not None:
+        return word
+    if param.type is Type.WORD:
+        raise wrong(f"must be {' or '.join(repr(str(c)) for c in param.words)}, not {value!r}")
+    is_vector = param.type is Type.VEC3
     try:
         numbers = tuple(value) if is_vector else (value,)
         if any(isinstance(x, (str, bytes, bool)) for x in numbers):
             raise TypeError
         items = tuple(float(x) for x in numbers)
     except (TypeError, ValueError, OverflowError):
-        raise wrong(f"must be {_TYPE_WORDS['vec3' if is_vector else NUM]}, not {value!r}") from None
+        raise wrong(f"must be {TYPE_WORDS[Type.VEC3 if is_vector else NUM]}, not {value!r}") from None
     if is_vector and len(items) != 3:
         raise wrong(f"must have 3 components, not {len(items)}")
     if not all(in_float_range(x) for x in items):
         raise wrong(f"must be finite (within ±{FLOAT_MAX:.3g}), not {value!r}")
-    data = ir.Vec(tuple(ir.const(x) for x in items)) if is_vector else ir.const(items[0])
-    numeric = param if not choices else _P(param.name, other, None, *param.constraints)
-    try:
-        checker.check_constraints(Span(1, 1, 1, 2), data, numeric, "render", subject=subject)
-    except _Failed:
-        raise ValueError(checker.errors[0].message) from None
+    says = param.violation(items)
+    if says:
+        raise ValueError(f"{repr(param.name) + ' of ' + repr('render') if subject is None else subject} {says}".lstrip())
     if is_vector:
         return items
-    return int(items[0]) if param.type == "int" else items[0]
+    return int(items[0]) if param.type is Type.WHOLE else items[0]
 
 
 def check_param_values(scene: CheckedScene, values) -> None:
     """Check every value that depends on params, for these param values;
     raise SceneError at each value's span that is out of its range."""
-    checker = _Checker(ast.Program((), scene.file, scene.source))
+    errors = []
+
+    def error(span: Span, message: str) -> None:
+        errors.append(diagnostic(scene.file, scene.source, span, message))
+    shown = ", ".join(f"{p.name} = {v:g}" for p, v in zip(scene.params, values))
     # checks between arguments last, and only if each argument is valid alone
     for check_ in sorted(scene.param_checks, key=lambda c: bool(c.others)):
-        if check_.others and checker.errors:
+        if check_.others and errors:
             break
         items = check_.value.items if isinstance(check_.value, ir.Vec) else (check_.value,)
         try:
-            constants = tuple(ir.const(ir.evaluate(x, values)) for x in items)
+            constants = [ir.evaluate(x, values) for x in items]
         except (ValueError, ZeroDivisionError, OverflowError):
-            checker.error(check_.span, f"'{check_.parameter.name}' of '{check_.owner}' is undefined "
-                                       f"for these param values")
+            error(check_.span, f"'{check_.parameter.name}' of '{check_.owner}' is undefined for these param values")
             continue
-        data = ir.Vec(constants) if isinstance(check_.value, ir.Vec) else constants[0]
         others = {k: ir.evaluate(v, values) for k, v in check_.others.items()}
-        shown = ", ".join(f"{p.name} = {v:g}" for p, v in zip(scene.params, values))
-        try:
-            checker.check_constraints(check_.span, data, check_.parameter, check_.owner, others)
-        except _Failed:
-            last = checker.errors.pop()
-            checker.error(check_.span, f"{last.message} (with {shown})")
-    if checker.errors:
-        raise SceneError(checker.errors)
+        says = check_.parameter.violation(constants, others)
+        if says:
+            error(check_.span, f"'{check_.parameter.name}' of '{check_.owner}' {says} (with {shown})")
+    if errors:
+        raise SceneError(errors)

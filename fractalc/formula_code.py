@@ -23,6 +23,8 @@ import numpy as np
 
 from . import ast, derive, formulas, ir
 from .errors import Span
+from .stdlib import MATH
+from .types import FLOAT_MAX, TYPE_WORDS, VECTOR_TYPES, Type, in_float_range, vector_type
 
 ZERO, ONE = ir.const(0.0), ir.const(1.0)
 INDEPENDENT = (ZERO, ZERO)        # a form: a value that does not depend on the point
@@ -37,9 +39,7 @@ ESTIMATES = ("escape_time_estimate", "linear_estimate")
 # on the Jacobian path), and jacobian_norm, the most z moves when the point
 # moves by one (the Jacobian's spectral norm; |dr| for similarities).
 DERIVED = ("dr", "jacobian_norm")
-VECTOR_TYPES = ("vec2", "vec3", "vec4")
-_WORDS = {"num": "a number", "vec2": "a 2-vector", "vec3": "a 3-vector", "vec4": "a 4-vector",
-          "mask": "a comparison"}
+NUMBER, MASK = Type.NUMBER, Type.MASK
 _COMPONENTS = "xyzw"
 
 
@@ -51,7 +51,7 @@ class Mistake(Exception):
 
 @dataclass(frozen=True)
 class Value:
-    type: str                                   # num | vec2..vec4 | mask
+    type: Type                                  # a number, vector or comparison (MASK)
     items: tuple[ir.Expr, ...]
     form: tuple[ir.Expr, ir.Expr] | None = INDEPENDENT
     underivable: Span | None = None             # an operation on the point without a derivative rule
@@ -62,15 +62,15 @@ class Value:
 
 
 def _word(v: Value) -> str:
-    return _WORDS[v.type]
+    return TYPE_WORDS[v.type]
 
 
 def number(x: ir.Expr) -> Value:
-    return Value("num", (x,))
+    return Value(NUMBER, (x,))
 
 
 def vector(items, form=INDEPENDENT) -> Value:
-    return Value(f"vec{len(items)}", tuple(items), form)
+    return Value(vector_type(len(items)), tuple(items), form)
 
 
 def _scaled_form(form, s: ir.Expr):
@@ -85,7 +85,7 @@ def _dependent_scalar(*operands: Value) -> Value:
     """The shared fields of a value computed from `operands` by an
     operation that is not a similarity."""
     independent = all(o.independent for o in operands)
-    return Value("num", (), INDEPENDENT if independent else None,
+    return Value(NUMBER, (), INDEPENDENT if independent else None,
                  next((o.underivable for o in operands if o.underivable), None))
 
 
@@ -199,7 +199,7 @@ class Interpreter:
 
     def if_(self, s: ast.If, env: dict, readonly) -> dict:
         condition = self.expr(s.condition, env)
-        if condition.type != "mask":
+        if condition.type != MASK:
             raise Mistake(s.condition.span, f"'if' needs a comparison (such as 'r < 1'), this is {_word(condition)}")
         then, otherwise = self.run(s.then, env, readonly), self.run(s.otherwise, env, readonly)
         merged, differ = dict(env), []
@@ -241,7 +241,7 @@ class Interpreter:
         if isinstance(e, ast.Vector):
             parts = [self.expr(x, env) for x in e.items]
             for x, v in zip(e.items, parts):
-                if v.type == "mask":
+                if v.type == MASK:
                     raise Mistake(x.span, "a vector's components must be numbers, this is a comparison")
             items = tuple(c for v in parts for c in v.items)
             if len(items) > 4:
@@ -249,7 +249,7 @@ class Interpreter:
             return _joined(parts)
         if isinstance(e, ast.Unary):
             v = self.expr(e.operand, env)
-            if v.type == "mask":
+            if v.type == MASK:
                 raise Mistake(e.span, "a comparison cannot be negated (swap the comparison instead)")
             return replace(v, items=tuple(ir.neg(x) for x in v.items))
         if isinstance(e, ast.Binary):
@@ -291,25 +291,25 @@ class Interpreter:
         if len(items) == 1:
             return replace(_dependent_scalar(v), items=items)
         # a projection does not lengthen: the bound a dr + b still holds
-        return replace(v, type=f"vec{len(items)}", items=items)
+        return replace(v, type=vector_type(len(items)), items=items)
 
     @staticmethod
     def chain(e: ast.Chain, values: list[Value]) -> Value:
         """Comparisons joined by '&' (and) or '|' (or), as a balanced tree."""
         for operand, v in zip(e.operands, values):
-            if v.type != "mask":
+            if v.type != MASK:
                 raise Mistake(operand.span, f"'{e.op}' joins comparisons ('{'and' if e.op == '&' else 'or'}'), "
                                             f"this is {_word(v)}")
         joined = ir.pairwise([v.items[0] for v in values], lambda a, b: ir.op("and" if e.op == "&" else "or", a, b))
-        return Value("mask", (joined,), INDEPENDENT if all(v.independent for v in values) else None)
+        return Value(MASK, (joined,), INDEPENDENT if all(v.independent for v in values) else None)
 
     def binary(self, e: ast.Binary, a: Value, b: Value) -> Value:
         op = e.op
-        if "mask" in (a.type, b.type):
+        if MASK in (a.type, b.type):
             raise Mistake(e.span, f"'{op}' needs numbers or vectors, not a comparison")
         if op in ("<", "<=", ">", ">=", "==", "!="):
-            if a.type != "num" or b.type != "num":
-                raise Mistake(e.span, f"'{op}' compares numbers, not {_word(a) if a.type != 'num' else _word(b)}"
+            if a.type != NUMBER or b.type != NUMBER:
+                raise Mistake(e.span, f"'{op}' compares numbers, not {_word(a) if a.type != NUMBER else _word(b)}"
                                       f" (compare components or lengths)")
             x, y = a.items[0], b.items[0]
             test = {"<": ("lt", x, y), "<=": ("le", x, y), ">": ("lt", y, x), ">=": ("le", y, x),
@@ -317,20 +317,20 @@ class Interpreter:
             mask = ir.op(*test)
             if op == "!=":
                 mask = ir.op("not", mask)
-            return Value("mask", (mask,), INDEPENDENT if a.independent and b.independent else None)
-        if a.type != "num" and b.type != "num" and a.type != b.type:
+            return Value(MASK, (mask,), INDEPENDENT if a.independent and b.independent else None)
+        if a.type != NUMBER and b.type != NUMBER and a.type != b.type:
             raise Mistake(e.span, f"'{op}' on vectors of different sizes ({len(a.items)} and {len(b.items)})")
         size = max(len(a.items), len(b.items))
-        left = a.items * size if a.type == "num" else a.items
-        right = b.items * size if b.type == "num" else b.items
+        left = a.items * size if a.type == NUMBER else a.items
+        right = b.items * size if b.type == NUMBER else b.items
         items = tuple(ir.op(op, x, y) for x, y in zip(left, right))
         underivable = a.underivable or b.underivable
-        kind = "num" if size == 1 and a.type == "num" and b.type == "num" else f"vec{size}"
+        kind = NUMBER if size == 1 and a.type == NUMBER and b.type == NUMBER else vector_type(size)
         if op in ("+", "-"):
-            if kind == "num":
+            if kind == NUMBER:
                 form = INDEPENDENT if a.independent and b.independent else None
-            elif "num" in (a.type, b.type):       # a number added to each component: a translation if constant
-                scalar, other = (a, b) if a.type == "num" else (b, a)
+            elif NUMBER in (a.type, b.type):       # a number added to each component: a translation if constant
+                scalar, other = (a, b) if a.type == NUMBER else (b, a)
                 form = other.form if scalar.independent else None
             else:
                 form = _summed_form(a.form, b.form)
@@ -340,9 +340,9 @@ class Interpreter:
         if op == "*" or op == "/":
             if a.independent and b.independent:
                 return Value(kind, items, INDEPENDENT, underivable)
-            scalar, other = (a, b) if a.type == "num" else (b, a) if b.type == "num" else (None, None)
+            scalar, other = (a, b) if a.type == NUMBER else (b, a) if b.type == NUMBER else (None, None)
             form = None
-            if kind != "num" and scalar is not None and scalar.independent and (op == "*" or scalar is b):
+            if kind != NUMBER and scalar is not None and scalar.independent and (op == "*" or scalar is b):
                 size_ = ir.op("abs", scalar.items[0])
                 form = _scaled_form(other.form, size_ if op == "*" else ir.div(ONE, size_))
             return Value(kind, items, form, underivable)
@@ -358,7 +358,7 @@ def _joined(parts: list[Value]) -> Value:
         form = dependent[0].form         # z with constants beside it: as long as z
     elif dependent:
         form = None
-    return Value(f"vec{len(items)}" if len(items) > 1 else "num", items, form,
+    return Value(vector_type(len(items)) if len(items) > 1 else NUMBER, items, form,
                  next((v.underivable for v in parts if v.underivable), None))
 
 
@@ -404,8 +404,8 @@ class Function:
         size = None
         for arg, want, v in zip(e.args, self.arguments, values):
             want = want.rstrip("?")
-            ok = {"n": v.type == "num", "3": v.type == "vec3", "4": v.type == "vec4", "m": v.type == "mask",
-                  "v": v.type in VECTOR_TYPES, "any": v.type != "mask"}[want]
+            ok = {"n": v.type == NUMBER, "3": v.type == Type.VEC3, "4": v.type == Type.VEC4, "m": v.type == MASK,
+                  "v": v.type in VECTOR_TYPES, "any": v.type != MASK}[want]
             if want == "v" and ok:
                 if size is not None and len(v.items) != size:
                     raise Mistake(arg.span, f"'{e.name}' needs vectors of one size ({size} and {len(v.items)})")
@@ -430,13 +430,13 @@ def _block(make: Callable):
         form = _scaled_form(z.form, block.factor) if block.factor is not None and others_independent else None
         if z.independent and others_independent:
             form = INDEPENDENT
-        return Value(f"vec{len(block.z)}", tuple(block.z), form,
+        return Value(vector_type(len(block.z)), tuple(block.z), form,
                      next((v.underivable for v in (z, *rest) if v.underivable), None))
     return compute
 
 
 def _box_fold(span: Span, z: Value, limit: Value) -> Value:
-    if limit.type != "num" and len(limit.items) != len(z.items):
+    if limit.type != NUMBER and len(limit.items) != len(z.items):
         raise Mistake(span, f"'box_fold' needs one limit or {len(z.items)} (one per axis of z), "
                             f"not {len(limit.items)}")
     return _block(formulas.box_fold)(span, z, limit)
@@ -446,7 +446,7 @@ def _map(name: str, derivable: bool = True):
     """A function of numbers applied per component (numbers broadcast)."""
     def compute(span: Span, *values: Value):
         size = max(len(v.items) for v in values)
-        lanes = [v.items * size if v.type == "num" else v.items for v in values]
+        lanes = [v.items * size if v.type == NUMBER else v.items for v in values]
         if any(len(lane) != size for lane in lanes):
             raise Mistake(span, f"'{name}' on vectors of different sizes")
         items = tuple(ir.op(name, *args) for args in zip(*lanes))
@@ -457,7 +457,7 @@ def _map(name: str, derivable: bool = True):
         form = INDEPENDENT if independent else None
         if name == "abs" and size > 1 and values[0].form is not None:
             form = values[0].form              # the octant fold: lengths kept
-        kind = "num" if size == 1 else f"vec{size}"
+        kind = NUMBER if size == 1 else vector_type(size)
         return Value(kind, items, form, underivable)
     return compute
 
@@ -501,8 +501,11 @@ def _quaternion_multiply(span: Span, a: Value, b: Value) -> Value:
     elif a.independent or b.independent:          # times a constant quaternion: a scale and a rotation
         fixed, moving = (a, b) if a.independent else (b, a)
         form = _scaled_form(moving.form, ir.length(fixed.items))
-    return Value("vec4", items, form, a.underivable or b.underivable)
+    return Value(Type.VEC4, items, form, a.underivable or b.underivable)
 
+
+_VECTOR_FUNCTIONS = {"length": _vector_fn(ir.length, NUMBER), "dot": _vector_fn(ir.dot, NUMBER),
+                     "cross": _vector_fn(_cross, Type.VEC3), "normalize": _vector_fn(_normalize, "same")}
 
 FUNCTIONS: dict[str, Function] = {
     # building blocks (formulas.py), each with its derivative rule
@@ -521,22 +524,10 @@ FUNCTIONS: dict[str, Function] = {
     "triplex_power": Function(("3", "n"), _block(formulas.triplex_power), "triplex_power(z, power)"),
     "quaternion_square": Function(("4",), _block(formulas.quaternion_square), "quaternion_square(q)"),
     "quaternion_multiply": Function(("4", "4"), _quaternion_multiply, "quaternion_multiply(a, b)"),
-    # math
-    **{name: Function(("any",), _map(name), f"{name}(x)")
-       for name in ("sin", "cos", "tan", "asin", "acos", "atan", "sqrt", "rsqrt", "abs", "exp", "log", "radians",
-                    "degrees")},
-    **{name: Function(("any",), _map(name, derivable=False), f"{name}(x)") for name in ("floor", "round")},
-    "atan2": Function(("any", "any"), _map("atan2"), "atan2(y, x)"),
-    "min": Function(("any", "any"), _map("min"), "min(a, b)"),
-    "max": Function(("any", "any"), _map("max"), "max(a, b)"),
-    "pow": Function(("any", "any"), _map("pow"), "pow(x, y)"),
-    "clamp": Function(("any", "any", "any"), _map("clamp"), "clamp(x, low, high)"),
-    "mix": Function(("any", "any", "any"), _map("mix"), "mix(a, b, t)"),
+    # math, as scenes have it (stdlib.MATH), and the choice per component
+    **{name: Function(f.arguments, _map(name, f.derivable) if f.per_component else _VECTOR_FUNCTIONS[name], f.about)
+       for name, f in MATH.items()},
     "select": Function(("m", "any", "any"), _select, "select(condition, if_true, if_false)"),
-    "length": Function(("v",), _vector_fn(ir.length, "num"), "length(v)"),
-    "dot": Function(("v", "v"), _vector_fn(ir.dot, "num"), "dot(a, b)"),
-    "cross": Function(("3", "3"), _vector_fn(_cross, "vec3"), "cross(a, b)"),
-    "normalize": Function(("v",), _vector_fn(_normalize, "same"), "normalize(v)"),
 }
 
 
@@ -677,7 +668,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
         env = {"c": _constant(julia, z, point), **_environment(use), "z": z}
         out = interpreter.run(use.formula.init, env, _readonly(use))
         z = out["z"]
-        if z.type not in ("vec3", "vec4"):
+        if z.type not in (Type.VEC3, Type.VEC4):
             assigned = next(s for s in use.formula.init if s.name == "z")
             raise Mistake(assigned.value.span, f"z must be a 3- or 4-vector, this is {_word(z)}")
         carried.append({name: out[name] for name in use.formula.carried if name != "z"})
@@ -820,7 +811,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
 
     def estimate(name: str, args: list[Value], span: Span) -> Value:
         offset = args[0].items[0] if args else ZERO
-        if args and (len(args) > 1 or args[0].type != "num"):
+        if args and (len(args) > 1 or args[0].type != NUMBER):
             raise Mistake(span, f"'{name}' takes at most one number (the linear estimate's offset)")
         return number(_estimate(name == "escape_time_estimate", final_z, rows, dr, offset))
 
@@ -831,7 +822,7 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
         distance = out.get("distance")
         if distance is None:
             raise Mistake(last.formula.final[-1].span, "'final' lines must set 'distance' (the estimate)")
-        if distance.type != "num":
+        if distance.type != NUMBER:
             assigned = next(s for s in reversed(last.formula.final) if s.name == "distance")
             raise Mistake(assigned.value.span, f"'distance' must be a number, this is {_word(distance)}")
         de = derive.finite_distance(distance.items[0])    # the formula's own: guarded as a derived one is
@@ -845,7 +836,6 @@ def _within_float(e: ast.Expr, value: Value) -> Value:
     """`value`, where what it computes from constants alone is a number the
     kernel's floats hold, as in a scene's expressions (check.py); a float
     kernel would compute infinity."""
-    from .check import FLOAT_MAX, in_float_range
     for item in value.items:
         if ir.is_const(item) and not in_float_range(item.value):
             raise Mistake(e.span, f"this gives {item.value:.3g}, beyond the kernel's floats ({FLOAT_MAX:.3g})")
@@ -944,10 +934,10 @@ def _step_values(interpreter, uses, carried, dependent, z: Value, c: Value) -> l
         out = interpreter.run(use.formula.step, env, _readonly(use))
         if _last_z(use.formula) is None:
             raise Mistake(use.formula.span, f"'{use.formula.name}' never sets z in its step")
-        for name, want in (("stop", "mask"), ("trap", "vec3")):
+        for name, want in (("stop", MASK), ("trap", Type.VEC3)):
             if name in out and out[name].type != want:
                 raise Mistake(_assignment(use.formula, name).span,
-                              f"'{name}' must be {_WORDS[want]}, this is {_word(out[name])}")
+                              f"'{name}' must be {TYPE_WORDS[want]}, this is {_word(out[name])}")
         for name, v in carried[k].items():
             if name not in out:
                 raise Mistake(use.formula.span, f"'{name}' is set on only one side of an 'if'")
