@@ -17,6 +17,8 @@ from enum import Enum
 
 from . import ast, formula_code, ir, pathtrace
 from .errors import Diagnostic, SceneError, Severity, Span, diagnostic
+from .formula_statements import Formula, split
+from .formula_values import Mistake
 from .program import (CAMERA_KEYS, DEFAULT_MATERIAL, LIGHT_KEYS, MATERIAL_KEYS, RENDER_KEYS, Camera, CameraPath,
                       CheckedScene, Coloring, Combination, CombinationKind, Fractal, Keyframe, Light, LightKind,
                       Material, ParamCheck, ParamInfo, Preset, Primitive, RenderSettings, Shadows, Shape,
@@ -73,9 +75,9 @@ class _Checker:
         self.param_checks: list[ParamCheck] = []
         self.shape_sizes: dict[int, tuple[Shape, int]] = {}
         # the library's formulas, and those a scene can call by name: the library's and the file's own
-        self.library_formulas: dict[str, tuple[formula_code.Formula, Signature]] = \
+        self.library_formulas: dict[str, tuple[Formula, Signature]] = \
             dict(library_formulas() if with_library else ())
-        self.formulas: dict[str, tuple[formula_code.Formula, Signature] | None] = dict(self.library_formulas)
+        self.formulas: dict[str, tuple[Formula, Signature] | None] = dict(self.library_formulas)
         self.notes: list[Diagnostic] = []
 
     # ---- diagnostics -------------------------------------------------------
@@ -212,9 +214,9 @@ class _Checker:
             parameters.append(Parameter(param.name, value.type, default, constraints))
             defaults.append(value.data)
         try:
-            formula = formula_code.split(decl, self.program.file)
+            formula = split(decl, self.program.file)
             formula_code.orbit((formula_code.Use(formula, tuple(defaults)),), formula_code.POINT, ir.const(2.0))
-        except formula_code.Mistake as mistake:
+        except Mistake as mistake:
             self.error(mistake.span, mistake.message)
             return
         self.formulas[decl.name] = (formula, Signature("formula", decl.name, tuple(parameters)))
@@ -259,7 +261,7 @@ class _Checker:
         for use in sequence:
             try:
                 size = formula_code.z_size(use, formula_code.POINT)
-            except formula_code.Mistake:
+            except Mistake:
                 continue               # the formula's own mistake, reported where it is used
             if size in (3, 4):
                 sizes.setdefault(size, use.formula.name)
@@ -318,7 +320,7 @@ class _Checker:
             growth = formula_code.growth(formula.data, values["julia"], param_values)
             formula_code.orbit(formula.data, formula_code.POINT, ir.const(2.0), values["bailout"], values["julia"],
                                where=e.span, estimate=growth.estimate)
-        except formula_code.Mistake as mistake:
+        except Mistake as mistake:
             inside = next((u.formula for u in formula.data if u.formula.file != self.program.file), None)
             if inside is None or mistake.span == e.span:
                 self.fail(mistake.span, mistake.message)
