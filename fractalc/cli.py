@@ -33,7 +33,7 @@ def _parse_set(values: list[str]) -> dict[str, float]:
         name, sep, value = item.partition("=")
         if not sep or not name.strip():
             raise UsageError(f"--set takes NAME=VALUE, not '{item}'")
-        from .check import in_float_range
+        from .types import in_float_range
         try:
             number = parse_number(value)
         except ValueError as error:
