@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 from . import ast, ir
 from .errors import Diagnostic, Severity, Span, diagnostic
+from .expressions import Mistake
 from .formula_statements import Formula
 from .program import Material, ParamCheck, ParamInfo, Shape
 from .stdlib import Signature, library
@@ -62,6 +63,14 @@ class CheckerBase:
     def fail(self, span: Span, message: str):
         self.error(span, message)
         raise Failed
+
+    def shared(self, compute, *args):
+        """`compute(*args)` of the expression core (fractalc/expressions.py),
+        its Mistake this checker's error."""
+        try:
+            return compute(*args)
+        except Mistake as mistake:
+            self.fail(mistake.span, mistake.message)
 
     def note(self, span: Span, message: str) -> None:
         self.notes.append(diagnostic(self.program.file, self.program.source, span, message, Severity.NOTE))

@@ -9,11 +9,12 @@ from . import ast, ir
 from .check_base import (COLORING, ERROR, FORMULA, MATERIAL, NUM, SHAPE, WORD, CheckerBase, Failed, Value,
                          default_value, source_text)
 from .check_formulas import LIBRARY
+from .expressions import broadcast, components, require_vector_size
 from .errors import Span
 from .program import (DEFAULT_MATERIAL, Coloring, Combination, CombinationKind, Fractal, ParamCheck, Primitive, Shape,
                       Transformed, WithMaterial, cosine_palette)
 from .stdlib import AUTO_SCALE, COLORINGS, COMBINATORS, MATH, TRANSFORMS, Signature
-from .types import FLOAT_MAX, TYPE_WORDS, VECTOR_TYPES, Parameter, Type, in_float_range, vector_type
+from .types import FLOAT_MAX, NUMBER_TYPES, TYPE_WORDS, VECTOR_TYPES, Parameter, Type, in_float_range, vector_type
 
 # Parts (primitives, transforms, combinations) a scene may have, counting a
 # let each time it is used. The kernel's build time grows faster than its
@@ -45,8 +46,7 @@ class ExpressionChecking(CheckerBase):
             for item, v in zip(e.items, items):
                 if v.type != NUM:
                     self.fail(item.span, f"a vector's components must be numbers, this is {TYPE_WORDS[v.type]}")
-            if len(items) > 4:
-                self.fail(e.span, f"vectors have 2 to 4 components, this one has {len(items)}")
+            self.shared(require_vector_size, e, len(items))
             return Value(vector_type(len(items)), ir.Vec(tuple(v.data for v in items)))
         if isinstance(e, ast.Unary):
             operand = self.expression(e.operand)
@@ -107,13 +107,13 @@ class ExpressionChecking(CheckerBase):
     def arithmetic(self, e, op: str, operands: list[Value], mode: str = "map") -> Value:
         """Component-wise arithmetic on numbers and vectors; numbers broadcast."""
         for operand in operands:
-            if operand.type not in (NUM, *VECTOR_TYPES):
+            if operand.type not in NUMBER_TYPES:
                 self.fail(e.span, f"'{op}' needs numbers or vectors, not {TYPE_WORDS[operand.type]}")
-        sizes = {len(o.data) for o in operands if o.type != NUM}
-        if len(sizes) > 1:
-            self.fail(e.span, f"'{op}' on vectors of different sizes ({', '.join(map(str, sorted(sizes)))})")
-        size = sizes.pop() if sizes else 0
-        lanes = [o.data.items if o.type != NUM else (o.data,) * max(size, 1) for o in operands]
+        combined = broadcast([(o.type, o.data.items if o.type != NUM else (o.data,)) for o in operands])
+        if combined is None:
+            sizes = sorted({len(o.data) for o in operands if o.type != NUM})
+            self.fail(e.span, f"'{op}' on vectors of different sizes ({', '.join(map(str, sizes))})")
+        size, lanes = combined
         try:
             items = tuple(ir.op(op, *args) for args in zip(*lanes))
         except (ValueError, ZeroDivisionError, OverflowError):
@@ -121,7 +121,7 @@ class ExpressionChecking(CheckerBase):
         for item in items:
             if ir.is_const(item) and not in_float_range(item.value):
                 self.fail(e.span, f"'{op}' gives {item.value:.3g}, beyond the kernel's floats ({FLOAT_MAX:.3g})")
-        if size == 0:
+        if size == 1:
             return Value(NUM, items[0])
         return Value(vector_type(size), ir.Vec(items))
 
@@ -293,13 +293,8 @@ class ExpressionChecking(CheckerBase):
         receiver = self.value_of(e.receiver)
         if receiver.type == Type.ERROR:
             raise Failed
-        if receiver.type not in VECTOR_TYPES:
-            self.fail(e.span, f"'.{e.name}' takes components of a vector, this is {TYPE_WORDS[receiver.type]}")
-        names = "xyzw"[:len(receiver.data)]
-        if len(e.name) > 4 or any(ch not in names for ch in e.name):
-            self.fail(e.name_span, f"'.{e.name}' is not a component of {TYPE_WORDS[receiver.type]} "
-                                   f"(components: {', '.join(names)})")
-        items = tuple(receiver.data.items[names.index(ch)] for ch in e.name)
+        vector = receiver.data.items if receiver.type in VECTOR_TYPES else ()
+        items = self.shared(components, e, receiver.type, vector)
         return Value(NUM, items[0]) if len(items) == 1 else Value(vector_type(len(items)), ir.Vec(items))
 
     def method(self, e: ast.Method) -> Value:

@@ -11,7 +11,7 @@ from . import ast, formula_code, ir
 from .check_base import FORMULA, NUM, SHAPE, WORD, CheckerBase, Failed, Value, default_value
 from .errors import Span
 from .formula_statements import split
-from .formula_values import Mistake
+from .expressions import Mistake
 from .program import Fractal
 from .stdlib import COLORINGS, COMBINATORS, MATH, Signature
 from .types import TYPE_WORDS, Parameter, Type, above, at_most, between, range_violation

@@ -20,9 +20,10 @@ import numpy as np
 
 from . import ast, derive, ir
 from .errors import Span
+from .expressions import Mistake
 from .formula_interpreter import Interpreter
 from .formula_statements import Formula, nested
-from .formula_values import INDEPENDENT, MASK, NUMBER, ONE, ZERO, Mistake, Value, number, vector, word
+from .formula_values import INDEPENDENT, MASK, NUMBER, ONE, ZERO, Value, number, vector, word
 from .types import TYPE_WORDS, Type
 
 # A step whose z is beyond this length (or not finite) is not taken: the ray

@@ -9,8 +9,9 @@ from typing import Callable
 
 from . import ast, formulas, ir
 from .errors import Span
+from .expressions import Mistake, broadcast, components, require_vector_size
 from .formula_statements import DERIVED, ESTIMATES
-from .formula_values import (COMPONENTS, INDEPENDENT, MASK, NUMBER, ONE, Mistake, Value, dependent_scalar,
+from .formula_values import (INDEPENDENT, MASK, NUMBER, ONE, Value, dependent_scalar,
                              number, scaled_form, summed_form, word)
 from .stdlib import MATH
 from .types import FLOAT_MAX, VECTOR_TYPES, Type, in_float_range, vector_type
@@ -81,9 +82,7 @@ class Interpreter:
             for x, v in zip(e.items, parts):
                 if v.type == MASK:
                     raise Mistake(x.span, "a vector's components must be numbers, this is a comparison")
-            items = tuple(c for v in parts for c in v.items)
-            if len(items) > 4:
-                raise Mistake(e.span, f"vectors have 2 to 4 components, this one has {len(items)}")
+            require_vector_size(e, sum(len(v.items) for v in parts))
             return joined(parts)
         if isinstance(e, ast.Unary):
             v = self.expr(e.operand, env)
@@ -120,12 +119,7 @@ class Interpreter:
         raise Mistake(e.span, "not an expression a formula can compute")
 
     def field(self, e: ast.Field, v: Value) -> Value:
-        if v.type not in VECTOR_TYPES:
-            raise Mistake(e.span, f"'.{e.name}' takes components of a vector, this is {word(v)}")
-        if not e.name or any(ch not in COMPONENTS[:len(v.items)] for ch in e.name) or len(e.name) > 4:
-            raise Mistake(e.name_span, f"'.{e.name}' is not a component of {word(v)} "
-                                       f"(components: {', '.join(COMPONENTS[:len(v.items)])})")
-        items = tuple(v.items[COMPONENTS.index(ch)] for ch in e.name)
+        items = components(e, v.type, v.items)
         if len(items) == 1:
             return replace(dependent_scalar(v), items=items)
         # a projection does not lengthen: the bound a dr + b still holds
@@ -156,11 +150,10 @@ class Interpreter:
             if op == "!=":
                 mask = ir.op("not", mask)
             return Value(MASK, (mask,), INDEPENDENT if a.independent and b.independent else None)
-        if a.type != NUMBER and b.type != NUMBER and a.type != b.type:
+        combined = broadcast([(a.type, a.items), (b.type, b.items)])
+        if combined is None:
             raise Mistake(e.span, f"'{op}' on vectors of different sizes ({len(a.items)} and {len(b.items)})")
-        size = max(len(a.items), len(b.items))
-        left = a.items * size if a.type == NUMBER else a.items
-        right = b.items * size if b.type == NUMBER else b.items
+        size, (left, right) = combined
         items = tuple(ir.op(op, x, y) for x, y in zip(left, right))
         underivable = a.underivable or b.underivable
         kind = NUMBER if size == 1 and a.type == NUMBER and b.type == NUMBER else vector_type(size)
@@ -283,10 +276,10 @@ def _box_fold(span: Span, z: Value, limit: Value) -> Value:
 def _map(name: str, derivable: bool = True):
     """A function of numbers applied per component (numbers broadcast)."""
     def compute(span: Span, *values: Value):
-        size = max(len(v.items) for v in values)
-        lanes = [v.items * size if v.type == NUMBER else v.items for v in values]
-        if any(len(lane) != size for lane in lanes):
+        combined = broadcast([(v.type, v.items) for v in values])
+        if combined is None:
             raise Mistake(span, f"'{name}' on vectors of different sizes")
+        size, lanes = combined
         items = tuple(ir.op(name, *args) for args in zip(*lanes))
         independent = all(v.independent for v in values)
         underivable = next((v.underivable for v in values if v.underivable), None)

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from . import ast
 from .errors import Span
-from .formula_values import Mistake
+from .expressions import Mistake
 
 ESTIMATES = ("escape_time_estimate", "linear_estimate")
 # What `final` lines may read of the compiler's derivative (docs/formulas.md):

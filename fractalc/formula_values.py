@@ -4,7 +4,7 @@ has its type, its IR components and, for the compiler's derivative, its
 running derivative of z (the point moves, z moves dr times as far), when
 the value is a similarity of z (a fold, a rotation, a uniform scale, c
 added; Syntopia, "Distance Estimated 3D Fractals", part VI). A mistake in a
-formula is a `Mistake` at its place.
+formula is an expressions.Mistake at its place.
 """
 from __future__ import annotations
 
@@ -17,13 +17,6 @@ from .types import TYPE_WORDS, Type, vector_type
 ZERO, ONE = ir.const(0.0), ir.const(1.0)
 INDEPENDENT = (ZERO, ZERO)        # a form: a value that does not depend on the point
 NUMBER, MASK = Type.NUMBER, Type.MASK
-COMPONENTS = "xyzw"
-
-
-class Mistake(Exception):
-    def __init__(self, span: Span, message: str):
-        super().__init__(message)
-        self.span, self.message = span, message
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,7 @@ class Type(StrEnum):
 
 
 VECTOR_TYPES = (Type.VEC2, Type.VEC3, Type.VEC4)
+NUMBER_TYPES = (Type.NUMBER, *VECTOR_TYPES)     # what arithmetic takes
 
 
 def vector_type(size: int) -> Type:
