@@ -162,8 +162,32 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
     `where`, the use, for the use's own mistakes)."""
     interpreter = Interpreter()
     uses = _unique(sequence)
+    z, carried = _initial_state(interpreter, uses, point, julia)
+    if julia is not None and len(julia.items) != len(z.items):
+        raise Mistake(where or sequence[0].formula.span, f"'julia' must be a {len(z.items)}-vector like z, "
+                                                          f"not a {len(julia.items)}-vector")
+    c = _constant(julia, z, point)
+    dependent, z_forms = _dependent_values(interpreter, uses, carried, z, c)
+    own = _require_derivable(sequence, uses, z, z_forms, where)
+    conformal = all(v.form is not None for v in z_forms) and not own
+    use_scalar = conformal if jacobian is None else (not jacobian and conformal)
+    if estimate is None:
+        estimate = growth(sequence, julia).estimate
+    escape = estimate is Estimate.ESCAPE_TIME
+    if bailout is None and escape:
+        bailout = ir.const(DEFAULT_BAILOUT)
+    loop = _OrbitLoop.of(interpreter, sequence, uses, carried, dependent, z, c, iterations, bailout, use_scalar,
+                         trap)
+    fields = loop.unpack(ir.loop(loop.pack(loop.start()), loop.count(), loop.round, loop.condition))
+    de = _final_estimate(uses[-1], loop, fields, point, own, escape)
+    traps = (*fields["trap"], *fields["steps"]) if trap else ()
+    inside = None if bailout is None else ir.op("select", _inside(fields["z"], bailout), ir.const(-1.0), ONE)
+    return Orbit(de, traps, use_scalar, inside)
 
-    # init: each formula's carried values, in order; z starts as the point
+
+def _initial_state(interpreter, uses, point, julia) -> tuple[Value, list[dict[str, Value]]]:
+    """z after every formula's `init` (it starts as the point) and each
+    formula's carried values, in order."""
     z = vector(point, (ONE, ZERO))
     carried: list[dict[str, Value]] = []
     for use in uses:
@@ -174,12 +198,12 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
             assigned = next(s for s in use.formula.init if s.name == "z")
             raise Mistake(assigned.value.span, f"z must be a 3- or 4-vector, this is {word(z)}")
         carried.append({name: out[name] for name in use.formula.carried if name != "z"})
-    if julia is not None and len(julia.items) != len(z.items):
-        raise Mistake(where or sequence[0].formula.span, f"'julia' must be a {len(z.items)}-vector like z, "
-                                                          f"not a {len(julia.items)}-vector")
-    c = _constant(julia, z, point)
+    return z, carried
 
-    # which carried values depend on the point (the scalar derivative then cannot follow them)
+
+def _dependent_values(interpreter, uses, carried, z: Value, c: Value) -> tuple[list[set], list[Value]]:
+    """Which carried values depend on the point (the scalar derivative then
+    cannot follow them), to a fixed point, and each formula's z after a step."""
     dependent: list[set] = [set() for _ in uses]
     for _ in range(8):
         probes = _step_values(interpreter, uses, carried, dependent, z, c)
@@ -187,7 +211,13 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
         if all(g <= d for g, d in zip(grown, dependent)):
             break
         dependent = [d | g for d, g in zip(dependent, grown)]
-    z_forms = [values["z"] for values in probes]
+    return dependent, [values["z"] for values in probes]
+
+
+def _require_derivable(sequence, uses, z: Value, z_forms: list[Value], where: Span | None) -> list[Use]:
+    """The uses that give their own estimate; a Mistake where a step changes
+    z's type, an own estimate is in a hybrid, or the compiler's estimate
+    would be derived through an operation without a derivative."""
     hybrid_dims = {len(use_z.items) for use_z in z_forms} | {len(z.items)}
     for use, value in zip(uses, z_forms):
         if value.type != z.type and len(uses) > 1 and len(hybrid_dims) > 1:
@@ -207,102 +237,130 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
                 raise Mistake(value.underivable, "the distance estimate cannot be derived through this "
                                                  "(it has no derivative): give the formula its own "
                                                  "'final distance = ...'")
-    conformal = all(v.form is not None for v in z_forms) and not own
-    use_scalar = conformal if jacobian is None else (not jacobian and conformal)
-    if estimate is None:
-        estimate = growth(sequence, julia).estimate
-    escape = estimate is Estimate.ESCAPE_TIME
-    if bailout is None and escape:
-        bailout = ir.const(DEFAULT_BAILOUT)
+    return own
 
-    steps = [(k, use) for k, use in enumerate(uses) for _ in range(_count(sequence, use))]
-    period = len(steps)
-    dims = len(z.items)
-    stops = any(_assignment(use.formula, "stop") for use in uses)
+
+@dataclass(frozen=True, eq=False)
+class _OrbitLoop:
+    """The orbit's loop: one round takes each step of the sequence in turn
+    (a hybrid's round is its whole sequence). Its state is `layout`: z,
+    each formula's carried values, dr (the scalar derivative), whether the
+    ray stopped, a hybrid's step counter and the orbit trap."""
+    interpreter: Interpreter
+    steps: tuple                    # (formula index, use) per step of a round
+    carried: list                   # each formula's carried values after init
+    dependent: list                 # each formula's carried values that depend on the point
+    z: Value
+    c: Value
+    iterations: ir.Expr
+    bailout: ir.Expr | None
+    use_scalar: bool
+    trap: bool
+    stops: bool                     # a formula sets `stop`
     # whether a ray can stop before the last step: else nothing reads `stopped`
-    # (a ray past the overflow limit keeps its state anyway: the selects below)
-    stoppable = bailout is not None or stops or period > 1
-    # the loop's carried values, by name: z, each formula's own, dr (the
-    # scalar derivative), whether the ray stopped, the step count of a
-    # hybrid and the orbit trap
-    layout = [("z", dims), *(((k, name), len(v.items)) for k, values in enumerate(carried)
-                            for name, v in values.items())]
-    layout += ([("dr", 1)] * use_scalar + [("stopped", 1)] * stoppable + [("counter", 1)] * (period > 1)
-               + [("trap", 4), ("steps", 1)] * trap)
+    # (a ray past the overflow limit keeps its state anyway: the selects in `round`)
+    stoppable: bool
+    layout: tuple
 
-    def unpack(state) -> dict:
+    @staticmethod
+    def of(interpreter, sequence, uses, carried, dependent, z, c, iterations, bailout, use_scalar, trap):
+        steps = tuple((k, use) for k, use in enumerate(uses) for _ in range(_count(sequence, use)))
+        stops = any(_assignment(use.formula, "stop") for use in uses)
+        stoppable = bailout is not None or stops or len(steps) > 1
+        layout = [("z", len(z.items)), *(((k, name), len(v.items)) for k, values in enumerate(carried)
+                                         for name, v in values.items())]
+        layout += ([("dr", 1)] * use_scalar + [("stopped", 1)] * stoppable + [("counter", 1)] * (len(steps) > 1)
+                   + [("trap", 4), ("steps", 1)] * trap)
+        return _OrbitLoop(interpreter, steps, carried, dependent, z, c, iterations, bailout, use_scalar, trap,
+                          stops, stoppable, tuple(layout))
+
+    @property
+    def period(self) -> int:
+        return len(self.steps)
+
+    def unpack(self, state) -> dict:
         fields, i = {}, 0
-        for key, width in layout:
+        for key, width in self.layout:
             fields[key] = tuple(state[i:i + width])
             i += width
         return fields
 
-    def pack(fields: dict) -> tuple:
-        return tuple(x for key, _ in layout for x in fields[key])
+    def pack(self, fields: dict) -> tuple:
+        return tuple(x for key, _ in self.layout for x in fields[key])
 
-    def formula_values(fields: dict, k: int, forms: bool) -> dict:
+    def start(self) -> dict:
+        return {"z": self.z.items, **{(k, name): v.items for k, values in enumerate(self.carried)
+                                      for name, v in values.items()},
+                "dr": (ONE,), "stopped": (ir.Const(0.0, ir.MASK),), "counter": (ZERO,),
+                "trap": (ir.const(1e30),) * 4, "steps": (ZERO,)}
+
+    def count(self) -> ir.Expr:
+        """The rounds: the iterations, a hybrid's rounded up to whole rounds."""
+        if self.period == 1:
+            return self.iterations
+        return ir.op("floor", ir.div(ir.add(self.iterations, ir.const(self.period - 1.0)),
+                                     ir.const(float(self.period))))
+
+    def formula_values(self, fields: dict, k: int, forms: bool) -> dict:
         return {name: replace(v, items=fields[(k, name)],
-                              form=(None if name in dependent[k] else INDEPENDENT) if forms else v.form)
-                for name, v in carried[k].items()}
+                              form=(None if name in self.dependent[k] else INDEPENDENT) if forms else v.form)
+                for name, v in self.carried[k].items()}
 
-    def round_(state):
-        fields = unpack(state)
-        z_now = Value(z.type, fields["z"], (ONE, ZERO))
-        stopped = fields["stopped"][0] if stoppable else None
-        for j, (k, use) in enumerate(steps):
+    def round(self, state):
+        fields = self.unpack(state)
+        z_now = Value(self.z.type, fields["z"], (ONE, ZERO))
+        stopped = fields["stopped"][0] if self.stoppable else None
+        for j, (k, use) in enumerate(self.steps):
             # with one step per iteration the loop's condition stops the ray
             going = ir.Const(1.0, ir.MASK)
-            if period > 1:
+            if self.period > 1:
                 going = ir.op("and", ir.op("not", stopped),
-                              ir.op("lt", ir.add(fields["counter"][0], ir.const(float(j))), iterations))
-                if bailout is not None:
-                    going = ir.op("and", going, _inside(z_now.items, bailout))
-            env = {"c": c, **_environment(use), **formula_values(fields, k, True), "z": z_now}
-            out = interpreter.run(use.formula.step, env, _readonly(use))
+                              ir.op("lt", ir.add(fields["counter"][0], ir.const(float(j))), self.iterations))
+                if self.bailout is not None:
+                    going = ir.op("and", going, _inside(z_now.items, self.bailout))
+            env = {"c": self.c, **_environment(use), **self.formula_values(fields, k, True), "z": z_now}
+            out = self.interpreter.run(use.formula.step, env, _readonly(use))
             moved = out["z"]
             ok = ir.op("and", going, ir.op("le", ir.dot(moved.items, moved.items), ir.const(OVERFLOW_LENGTH ** 2)))
-            kept = {"z": moved.items, **{(k, name): out[name].items for name in carried[k]}}
-            if use_scalar:
+            kept = {"z": moved.items, **{(k, name): out[name].items for name in self.carried[k]}}
+            if self.use_scalar:
                 a, b = moved.form
                 kept["dr"] = (ir.op("min", ir.add(ir.mul(a, fields["dr"][0]), b), ir.const(MAX_DERIVATIVE)),)
-            if trap:   # `trap = point`: where the orbit trap measures (else z)
+            if self.trap:   # `trap = point`: where the orbit trap measures (else z)
                 kept["trap"] = _trap_added(fields["trap"], out["trap"].items if "trap" in out else moved.items)
                 kept["steps"] = (ir.add(fields["steps"][0], ONE),)
             for key, items in kept.items():
                 fields[key] = tuple(ir.op("select", ok, a, b) for a, b in zip(items, fields[key]))
-            if stoppable:
+            if self.stoppable:
                 stopped = ir.op("or", stopped, ir.op("and", going, ir.op("not", ok)))
             if "stop" in out:               # `stop = condition`: these rays iterate no more
                 stopped = ir.op("or", stopped, ir.op("and", ok, out["stop"].items[0]))
-            z_now = Value(z.type, fields["z"], (ONE, ZERO))
-        if stoppable:
+            z_now = Value(self.z.type, fields["z"], (ONE, ZERO))
+        if self.stoppable:
             fields["stopped"] = (stopped,)
-        if period > 1:
-            fields["counter"] = (ir.add(fields["counter"][0], ir.const(float(period))),)
-        return pack(fields)
+        if self.period > 1:
+            fields["counter"] = (ir.add(fields["counter"][0], ir.const(float(self.period))),)
+        return self.pack(fields)
 
-    start = {"z": z.items, **{(k, name): v.items for k, values in enumerate(carried) for name, v in values.items()},
-             "dr": (ONE,), "stopped": (ir.Const(0.0, ir.MASK),), "counter": (ZERO,),
-             "trap": (ir.const(1e30),) * 4, "steps": (ZERO,)}
-    count = iterations if period == 1 else ir.op("floor", ir.div(ir.add(iterations, ir.const(period - 1.0)),
-                                                                   ir.const(float(period))))
-
-    def condition(state):
-        if bailout is None and not stops:
+    def condition(self, state):
+        if self.bailout is None and not self.stops:
             return None     # a hybrid's steps check `stopped` themselves
-        fields = unpack(state)
+        fields = self.unpack(state)
         going = ir.op("not", fields["stopped"][0])
-        return going if bailout is None else ir.op("and", going, _inside(fields["z"], bailout))
+        return going if self.bailout is None else ir.op("and", going, _inside(fields["z"], self.bailout))
 
-    fields = unpack(ir.loop(pack(start), count, round_, condition))
+
+def _final_estimate(last: Use, loop: _OrbitLoop, fields: dict, point, own: list, escape: bool) -> ir.Expr:
+    """The distance estimate from the loop's final state: the last formula's
+    `final` lines (its own estimate, or one of ESTIMATES), else the
+    compiler's of the estimate's kind; from z's Jacobian where the scalar
+    derivative cannot follow the steps."""
+    dims = len(loop.z.items)
     z_final = fields["z"]
-    finals = [formula_values(fields, k, False) for k in range(len(carried))]
-    dr = fields["dr"][0] if use_scalar else None
-    traps = (*fields["trap"], *fields["steps"]) if trap else ()
-
-    last = uses[-1]
-    final_z, final_values, rows = tuple(z_final), finals[-1], None
-    if not use_scalar and not own:
+    final_values = loop.formula_values(fields, len(loop.carried) - 1, False)
+    dr = fields["dr"][0] if loop.use_scalar else None
+    final_z, rows = tuple(z_final), None
+    if not loop.use_scalar and not own:
         # z's Jacobian: the final lines read z and the carried values from the
         # loop that carries the tangents too, so the iterations run once
         items = [x for v in final_values.values() for x in v.items]
@@ -310,6 +368,8 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
         final_z, rows, values = rebuilt[:dims], all_rows[:dims], iter(rebuilt[dims:])
         final_values = {name: replace(v, items=tuple(next(values) for _ in v.items))
                         for name, v in final_values.items()}
+    if not last.formula.final:
+        return _estimate(escape, final_z, rows, dr, ZERO)
 
     def estimate(name: str, args: list[Value], span: Span) -> Value:
         offset = args[0].items[0] if args else ZERO
@@ -317,21 +377,16 @@ def orbit(sequence: tuple[Use, ...], point: tuple[ir.Expr, ...], iterations: ir.
             raise Mistake(span, f"'{name}' takes at most one number (the linear estimate's offset)")
         return number(_estimate(name == "escape_time_estimate", final_z, rows, dr, offset))
 
-    if last.formula.final:
-        env = {"c": c, **_environment(last), **final_values, "z": Value(z.type, final_z, None),
-               **{name: number(_derivative(name, final_z, rows, dr)) for name in last.formula.derived}}
-        out = Interpreter(estimate).run(last.formula.final, env, _readonly(last) | set(last.formula.derived))
-        distance = out.get("distance")
-        if distance is None:
-            raise Mistake(last.formula.final[-1].span, "'final' lines must set 'distance' (the estimate)")
-        if distance.type != NUMBER:
-            assigned = next(s for s in reversed(last.formula.final) if s.name == "distance")
-            raise Mistake(assigned.value.span, f"'distance' must be a number, this is {word(distance)}")
-        de = derive.finite_distance(distance.items[0])    # the formula's own: guarded as a derived one is
-    else:
-        de = _estimate(escape, final_z, rows, dr, ZERO)
-    inside = None if bailout is None else ir.op("select", _inside(z_final, bailout), ir.const(-1.0), ONE)
-    return Orbit(de, traps, use_scalar, inside)
+    env = {"c": loop.c, **_environment(last), **final_values, "z": Value(loop.z.type, final_z, None),
+           **{name: number(_derivative(name, final_z, rows, dr)) for name in last.formula.derived}}
+    out = Interpreter(estimate).run(last.formula.final, env, _readonly(last) | set(last.formula.derived))
+    distance = out.get("distance")
+    if distance is None:
+        raise Mistake(last.formula.final[-1].span, "'final' lines must set 'distance' (the estimate)")
+    if distance.type != NUMBER:
+        assigned = next(s for s in reversed(last.formula.final) if s.name == "distance")
+        raise Mistake(assigned.value.span, f"'distance' must be a number, this is {word(distance)}")
+    return derive.finite_distance(distance.items[0])    # the formula's own: guarded as a derived one is
 
 
 def _jacobian(values, point, where: Span):
