@@ -14,7 +14,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 from . import ast, ir
-from .check_base import FORMULA, NUM, SHAPE, closest_name
+from .check_base import FORMULA, NUMBER, SHAPE, closest_name
 from .check_blocks import BlockChecking
 from .check_expressions import ExpressionChecking
 from .check_formulas import FormulaChecking
@@ -163,14 +163,15 @@ def check_value(param: Parameter, key: str, value, subject: str | None = None):
             raise TypeError
         items = tuple(float(x) for x in numbers)
     except (TypeError, ValueError, OverflowError):
-        raise wrong(f"must be {TYPE_WORDS[Type.VEC3 if is_vector else NUM]}, not {value!r}") from None
+        raise wrong(f"must be {TYPE_WORDS[Type.VEC3 if is_vector else NUMBER]}, not {value!r}") from None
     if is_vector and len(items) != 3:
         raise wrong(f"must have 3 components, not {len(items)}")
     if not all(in_float_range(x) for x in items):
         raise wrong(f"must be finite (within ±{FLOAT_MAX:.3g}), not {value!r}")
     says = param.violation(items)
     if says:
-        raise ValueError(f"{repr(param.name) + ' of ' + repr('render') if subject is None else subject} {says}".lstrip())
+        who = f"'{param.name}' of 'render'" if subject is None else subject
+        raise ValueError(f"{who} {says}".lstrip())
     if is_vector:
         return items
     return int(items[0]) if param.type is Type.WHOLE else items[0]

@@ -15,8 +15,8 @@ from .program import Material, ParamCheck, ParamInfo, Shape
 from .stdlib import Signature, library
 from .types import Parameter, Type
 
-NUM, SHAPE, MATERIAL, WORD, COLORING, FORMULA = Type.NUMBER, Type.SHAPE, Type.MATERIAL, Type.WORD, Type.COLORING, \
-    Type.FORMULA
+NUMBER, SHAPE, MATERIAL, WORD = Type.NUMBER, Type.SHAPE, Type.MATERIAL, Type.WORD
+COLORING, FORMULA = Type.COLORING, Type.FORMULA
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from . import ast, ir
-from .check_base import (COLORING, ERROR, FORMULA, MATERIAL, NUM, SHAPE, WORD, CheckerBase, Failed, Value,
+from .check_base import (COLORING, ERROR, FORMULA, MATERIAL, NUMBER, SHAPE, WORD, CheckerBase, Failed, Value,
                          default_value, source_text)
 from .check_formulas import LIBRARY
 from .expressions import broadcast, components, require_vector_size
@@ -36,7 +36,7 @@ class ExpressionChecking(CheckerBase):
             if not in_float_range(e.value):
                 self.fail(e.span, f"{source_text(self.program, e.span)} is too large a number "
                                   f"(the kernel's floats reach {FLOAT_MAX:.3g})")
-            return Value(NUM, ir.const(e.value))
+            return Value(NUMBER, ir.const(e.value))
         if isinstance(e, ast.Name):
             return self.name(e)
         if isinstance(e, ast.Vector):
@@ -44,7 +44,7 @@ class ExpressionChecking(CheckerBase):
             if any(v.type == Type.ERROR for v in items):
                 return ERROR
             for item, v in zip(e.items, items):
-                if v.type != NUM:
+                if v.type != NUMBER:
                     self.fail(item.span, f"a vector's components must be numbers, this is {TYPE_WORDS[v.type]}")
             self.shared(require_vector_size, e, len(items))
             return Value(vector_type(len(items)), ir.Vec(tuple(v.data for v in items)))
@@ -102,16 +102,17 @@ class ExpressionChecking(CheckerBase):
                           f"'{e.op}' combines shapes ({'union' if e.op == '|' else 'intersection'}), "
                           f"this is {TYPE_WORDS[value.type]}")
             shapes.append(value.data)
-        return self.shape(Combination(CombinationKind.UNION if e.op == "|" else CombinationKind.INTERSECT, tuple(shapes), ir.const(0.0), e.span))
+        kind = CombinationKind.UNION if e.op == "|" else CombinationKind.INTERSECT
+        return self.shape(Combination(kind, tuple(shapes), ir.const(0.0), e.span))
 
     def arithmetic(self, e, op: str, operands: list[Value], mode: str = "map") -> Value:
         """Component-wise arithmetic on numbers and vectors; numbers broadcast."""
         for operand in operands:
             if operand.type not in NUMBER_TYPES:
                 self.fail(e.span, f"'{op}' needs numbers or vectors, not {TYPE_WORDS[operand.type]}")
-        combined = broadcast([(o.type, o.data.items if o.type != NUM else (o.data,)) for o in operands])
+        combined = broadcast([(o.type, o.data.items if o.type != NUMBER else (o.data,)) for o in operands])
         if combined is None:
-            sizes = sorted({len(o.data) for o in operands if o.type != NUM})
+            sizes = sorted({len(o.data) for o in operands if o.type != NUMBER})
             self.fail(e.span, f"'{op}' on vectors of different sizes ({', '.join(map(str, sizes))})")
         size, lanes = combined
         try:
@@ -122,7 +123,7 @@ class ExpressionChecking(CheckerBase):
             if ir.is_const(item) and not in_float_range(item.value):
                 self.fail(e.span, f"'{op}' gives {item.value:.3g}, beyond the kernel's floats ({FLOAT_MAX:.3g})")
         if size == 1:
-            return Value(NUM, items[0])
+            return Value(NUMBER, items[0])
         return Value(vector_type(size), ir.Vec(items))
 
     def bind(self, e, signature: Signature, args: tuple[ast.Arg, ...]) -> dict[str, tuple[ast.Arg, Value]]:
@@ -171,7 +172,7 @@ class ExpressionChecking(CheckerBase):
                 self.fail(span, f"unknown material '{value.data}'{hint}")
             self.fail(span, f"'{param.name}' of '{owner}' needs {word}, this is {TYPE_WORDS[value.type]}")
         data = value.data
-        if want is Type.SIZE and value.type == NUM:
+        if want is Type.SIZE and value.type == NUMBER:
             data = ir.vec(data, data, data)
         self.check_constraints(span, data, param, owner)
         return data
@@ -295,7 +296,7 @@ class ExpressionChecking(CheckerBase):
             raise Failed
         vector = receiver.data.items if receiver.type in VECTOR_TYPES else ()
         items = self.shared(components, e, receiver.type, vector)
-        return Value(NUM, items[0]) if len(items) == 1 else Value(vector_type(len(items)), ir.Vec(items))
+        return Value(NUMBER, items[0]) if len(items) == 1 else Value(vector_type(len(items)), ir.Vec(items))
 
     def method(self, e: ast.Method) -> Value:
         if isinstance(e.receiver, ast.Name) and e.receiver.name == LIBRARY and not any(
@@ -363,9 +364,9 @@ def vector_math(name: str, vectors: list[ir.Vec]) -> Value:
         return total
 
     if name == "length":
-        return Value(NUM, ir.op("sqrt", dot(a, a)))
+        return Value(NUMBER, ir.op("sqrt", dot(a, a)))
     if name == "dot":
-        return Value(NUM, dot(a, vectors[1].items))
+        return Value(NUMBER, dot(a, vectors[1].items))
     if name == "normalize":
         length = ir.op("sqrt", dot(a, a))
         return Value(vector_type(len(a)), ir.Vec(tuple(ir.div(x, length) for x in a)))
@@ -376,6 +377,6 @@ def vector_math(name: str, vectors: list[ir.Vec]) -> Value:
 
 
 # What a value of each parameter type may be
-ACCEPTED = {Type.NUMBER: (NUM,), Type.WHOLE: (NUM,), Type.VEC3: (Type.VEC3,), Type.VEC4: (Type.VEC4,),
-             Type.COLOR: (Type.VEC3,), Type.SIZE: (NUM, Type.VEC3), Type.MATERIAL: (MATERIAL,),
+ACCEPTED = {Type.NUMBER: (NUMBER,), Type.WHOLE: (NUMBER,), Type.VEC3: (Type.VEC3,), Type.VEC4: (Type.VEC4,),
+             Type.COLOR: (Type.VEC3,), Type.SIZE: (NUMBER, Type.VEC3), Type.MATERIAL: (MATERIAL,),
              Type.SHAPE: (SHAPE,)}

@@ -8,7 +8,7 @@ import os
 from dataclasses import replace
 
 from . import ast, formula_code, ir
-from .check_base import FORMULA, NUM, SHAPE, WORD, CheckerBase, Failed, Value, default_value
+from .check_base import FORMULA, NUMBER, SHAPE, WORD, CheckerBase, Failed, Value, default_value
 from .errors import Span
 from .formula_statements import split
 from .expressions import Mistake
@@ -30,8 +30,8 @@ MAX_HYBRID_STEPS = 256
 FORMULA_FORMS = {
     "fractal": Signature("fractal", "fractal", (
         Parameter("formula", Type.FORMULA), Parameter("iterations", Type.WHOLE, 12.0, (between(1, 1000),)),
-        Parameter("bailout", NUM, 0.0, (above(0),)), Parameter("julia", Type.VEC3, 0.0),
-        Parameter("bound", NUM, 0.0, (above(0),)), Parameter("step", NUM, 1.0, (above(0), at_most(1))))),
+        Parameter("bailout", NUMBER, 0.0, (above(0),)), Parameter("julia", Type.VEC3, 0.0),
+        Parameter("bound", NUMBER, 0.0, (above(0),)), Parameter("step", NUMBER, 1.0, (above(0), at_most(1))))),
     "hybrid": Signature("fractal", "hybrid", ()),
 }
 
@@ -60,7 +60,7 @@ class FormulaChecking(CheckerBase):
             seen.add(param.name)
             value = self.evaluate(param.default)
             items = value.data.items if isinstance(value.data, ir.Vec) else (value.data,)
-            if value.type not in (NUM, Type.VEC3, Type.VEC4) or not all(ir.is_const(x) for x in items):
+            if value.type not in (NUMBER, Type.VEC3, Type.VEC4) or not all(ir.is_const(x) for x in items):
                 if value.type != Type.ERROR:
                     self.error(param.default.span, "a formula parameter's default must be a constant number "
                                                    "or a 3- or 4-vector")
@@ -74,7 +74,7 @@ class FormulaChecking(CheckerBase):
                 if low > high:
                     self.error(param.bounds[0].span, f"the range [{low:g}, {high:g}] is empty")
                     return
-                if value.type != NUM:
+                if value.type != NUMBER:
                     self.error(param.bounds[0].span, "a range is for a number parameter")
                     return
                 outside = range_violation(param.name, items[0].value, low, high)
@@ -82,7 +82,7 @@ class FormulaChecking(CheckerBase):
                     self.error(param.default.span, outside)
                     return
                 constraints = (between(low, high),)
-            default = items[0].value if value.type == NUM else tuple(x.value for x in items)
+            default = items[0].value if value.type == NUMBER else tuple(x.value for x in items)
             parameters.append(Parameter(param.name, value.type, default, constraints))
             defaults.append(value.data)
         try:
@@ -147,7 +147,7 @@ class FormulaChecking(CheckerBase):
         """`formula * n`: n steps of it in turn in a hybrid."""
         if count.type == SHAPE:
             self.fail(e.left.span, "this is a formula: make it a shape with 'fractal(formula(...), iterations: N)'")
-        if e.op != "*" or count.type != NUM:
+        if e.op != "*" or count.type != NUMBER:
             self.fail(e.span, f"a formula can only be repeated: 'formula * count', not '{e.op}' "
                               f"with {TYPE_WORDS[count.type]}")
         n = count.data.value if ir.is_const(count.data) else None

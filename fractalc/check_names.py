@@ -4,7 +4,7 @@ from __future__ import annotations
 
 
 from . import ast, ir
-from .check_base import ERROR, MATERIAL, NUM, WORD, CheckerBase, Failed, Value
+from .check_base import ERROR, MATERIAL, NUMBER, WORD, CheckerBase, Failed, Value
 from .check_formulas import FORMULA_FORMS
 from .errors import Span
 from .program import ParamInfo
@@ -31,7 +31,7 @@ class NameChecking(CheckerBase):
         value = self.evaluate(expr)
         if value.type == Type.ERROR:
             return None
-        if value.type != NUM or not ir.is_const(value.data):
+        if value.type != NUMBER or not ir.is_const(value.data):
             self.error(expr.span, f"{what} must be a constant number")
             return None
         return value.data.value
@@ -83,7 +83,7 @@ class NameChecking(CheckerBase):
     def name(self, e: ast.Name) -> Value:
         if e.name in self.params:
             info = self.params[e.name]
-            return Value(NUM, ir.Param(info.index, info.name))
+            return Value(NUMBER, ir.Param(info.index, info.name))
         if e.name in self.lets:
             return self.let_value(e.name)
         if e.name in self.material_decls:
