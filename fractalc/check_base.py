@@ -11,7 +11,7 @@ from . import ast, ir
 from .errors import Diagnostic, Severity, Span, diagnostic
 from .expressions import Mistake
 from .formula_statements import Formula
-from .program import Material, ParamCheck, ParamInfo, Shape
+from .program import Material, ParamCheck, ParamInfo, Shape, constant
 from .stdlib import Signature, library
 from .types import Parameter, Type
 
@@ -101,10 +101,10 @@ def source_text(program: ast.Program, span: Span) -> str:
 
 
 def default_value(p: Parameter):
+    """An argument's default as its value: a word, or IR constants (a size's
+    number on all three axes)."""
     if isinstance(p.default, str):
         return p.default
-    if isinstance(p.default, tuple):
-        return ir.Vec(tuple(ir.const(x) for x in p.default))
-    if p.type is Type.SIZE:
+    if p.type is Type.SIZE and not isinstance(p.default, tuple):
         return ir.vec(*(ir.const(p.default),) * 3)
-    return ir.const(p.default)
+    return constant(p.default)

@@ -163,10 +163,11 @@ DEFAULT_MATERIAL = "(default)"
 
 
 def default_material() -> Material:
-    return Material(DEFAULT_MATERIAL, **{name: _constant(p.default) for name, p in MATERIAL_KEYS.items()})
+    return Material(DEFAULT_MATERIAL, **{name: constant(p.default) for name, p in MATERIAL_KEYS.items()})
 
 
-def _constant(value) -> ir.Expr | ir.Vec:
+def constant(value) -> ir.Expr | ir.Vec:
+    """A default's number or tuple as IR constants."""
     return ir.Vec(tuple(ir.const(x) for x in value)) if isinstance(value, tuple) else ir.const(value)
 
 
