@@ -167,6 +167,12 @@ class Parameter:
     block: type | None = None
     runtime: bool = False          # a render key the kernel takes as an argument: no rebuild
 
+    def __post_init__(self):
+        # a type or constraint still spelt as text ("num", ">0") fails where it is declared, not in a check
+        if not isinstance(self.type, Type) or not all(isinstance(c, Constraint) for c in self.constraints):
+            raise TypeError(f"parameter '{self.name}': a Type and typed constraints (types.parse_constraint), "
+                            f"not {self.type!r} {self.constraints!r}")
+
     @property
     def range(self) -> tuple[float | None, float | None, bool, bool]:
         """(low, high, low excluded, high excluded) of its numeric bounds,

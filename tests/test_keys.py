@@ -70,3 +70,8 @@ def test_the_camera_checks_its_aim_in_one_place():
     assert Camera(position=(0, 0, 5)).aimed(up_given=False).up == (0.0, 1.0, 0.0)
     with pytest.raises(SceneError, match="the camera's target is its position"):
         _checked("scene sphere(1)\ncamera { position: (1, 1, 1), target: (1, 1, 1) }")
+
+
+def test_a_parameter_spelt_as_text_fails_where_it_is_declared():
+    with pytest.raises(TypeError, match="parameter 'radius'"):
+        Parameter("radius", "num", None, (">0",))
