@@ -19,7 +19,7 @@ import sys
 
 import numpy as np
 
-from . import __version__
+from .version import __version__
 from .api import Scene
 from .errors import RenderError
 from .paths import camera_at, frame_times, params_at

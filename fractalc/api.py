@@ -16,14 +16,16 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
-from . import __version__, pathtrace, program, run
+from . import pathtrace, program, run
 from .arguments import checked, require_type
 from .build import build
 from .devices import open_device
 from .denoise import denoise_image, require_denoiser
-from .check import FLOAT_MAX, RENDER_KEYS, check, check_param_values, check_value, in_float_range, unknown_param
+from .check import CAMERA_KEYS, RENDER_KEYS, check, check_param_values, check_value, unknown_param
 from .emit import Target, emit, emit_distance, uniform_source
+from .version import __version__
 from .errors import RenderError, SceneError, diagnostic
+from .ir import FLOAT_MAX, in_float_range
 from .lanes import CHOICES as LANE_CHOICES
 from .lower import lower
 from .memory import require_memory
@@ -102,7 +104,6 @@ class Camera(program.Camera):
     key. Looking straight along the default up, y is up instead."""
 
     def __post_init__(self):
-        from .check import CAMERA_KEYS
         for key, parameter in CAMERA_KEYS.items():
             value = getattr(self, key)
             if value is None and key == "focus":      # on the target

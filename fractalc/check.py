@@ -17,6 +17,7 @@ from enum import Enum
 
 from . import ast, formula_code, ir, pathtrace
 from .errors import Diagnostic, SceneError, Severity, Span, diagnostic
+from .ir import FLOAT_MAX, in_float_range
 from .program import (DEFAULT_MATERIAL, PROJECTIONS, STEREO_LAYOUTS, Camera, CameraPath, CheckedScene, Coloring,
                       Combination, Environment, Fog, Fractal, Glow, Keyframe, Light, Material, ParamCheck, ParamInfo,
                       Preset, Primitive, RenderSettings, Shape, Slice, Transformed, WithMaterial, cosine_palette,
@@ -57,13 +58,6 @@ MAX_HYBRID_STEPS = 256
 MAX_EPSILON_SCALE = 1000
 # Errors that get a "did you mean" (each costs time in the number of known names)
 SUGGESTED_ERRORS = 10
-# The largest float: a number beyond it is infinite in a float kernel
-FLOAT_MAX = 3.4028234663852886e38
-
-
-def in_float_range(x: float) -> bool:
-    return math.isfinite(x) and abs(x) <= FLOAT_MAX
-
 _TYPE_WORDS = {NUM: "a number", SHAPE: "a shape", MATERIAL: "a material", WORD: "a name", FORMULA: "a formula",
                COLORING: "a colouring (orbit_trap)", "color": "a colour (r, g, b) or orbit_trap(...)",
                "vec2": "a 2-vector", "vec3": "a 3-vector", "vec4": "a 4-vector",

@@ -845,10 +845,9 @@ def _within_float(e: ast.Expr, value: Value) -> Value:
     """`value`, where what it computes from constants alone is a number the
     kernel's floats hold, as in a scene's expressions (check.py); a float
     kernel would compute infinity."""
-    from .check import FLOAT_MAX, in_float_range
     for item in value.items:
-        if ir.is_const(item) and not in_float_range(item.value):
-            raise Mistake(e.span, f"this gives {item.value:.3g}, beyond the kernel's floats ({FLOAT_MAX:.3g})")
+        if ir.is_const(item) and not ir.in_float_range(item.value):
+            raise Mistake(e.span, f"this gives {item.value:.3g}, beyond the kernel's floats ({ir.FLOAT_MAX:.3g})")
     return value
 
 

@@ -31,6 +31,12 @@ class Type(str, enum.Enum):
 
 
 REAL, INT, MASK, VEC3 = Type.REAL, Type.INT, Type.MASK, Type.VEC3
+# The largest float: a number beyond it is infinite in a float kernel
+FLOAT_MAX = 3.4028234663852886e38
+
+
+def in_float_range(x: float) -> bool:
+    return math.isfinite(x) and abs(x) <= FLOAT_MAX
 
 
 class _Interned(type):
