@@ -27,7 +27,9 @@ from typing import Callable
 import numpy as np
 
 from .api import Image, Scene
+from .arguments import parse_number
 from .bench import aligned, machine, machine_rows
+from .check import RENDER_KEYS, check_value
 from .emit import Target, fast_math
 from .errors import RenderError
 from .write import linear_to_srgb, publish
@@ -103,8 +105,6 @@ def one_knob_changes(settings: dict) -> list[dict]:
 def parse_changes(items: list[str]) -> list[dict]:
     """`KNOB=V1,V2` items (from --vary) as one-knob changes; ValueError
     saying what is wrong."""
-    from .arguments import parse_number
-    from .check import RENDER_KEYS, check_value
     changes = []
     for item in items:
         knob, sep, values = item.partition("=")

@@ -356,7 +356,7 @@ def test_lanes_agree_with_eight(lanes):
     planes = {}
     for n in (8, lanes):
         program, device = _built(scene, n)
-        pixels = run_module.render(program, device, frame, params, n, False)
+        pixels = run_module.RenderKernel(program, device, n, False).render(frame, params)
         assert pixels.shape == (height, width, len(run_module.CHANNELS))
         planes[n] = dict(zip(run_module.CHANNELS, np.moveaxis(pixels, -1, 0)))
     a, b = planes[8], planes[lanes]
