@@ -4,8 +4,10 @@ Each round renders the frame with `Scene.render` (a new image, as a caller
 gets it) and then launches the same program's kernel over the same tiles
 directly (its kernel, buffers and image made once, before the rounds: the
 kernel's own time and the launches that no host loop avoids); the host
-time is the difference of the two medians. Rounds interleave the two, so
-that load on a shared machine falls on both alike.
+time is the median of the rounds' differences. Each round runs the two
+back to back, so that load on a shared machine falls on both alike. The
+calling thread's CPU time is measured too (the waits for the kernel
+sleep): its difference is the host's own work, which load hardly changes.
 
     python benchmarks/host_time.py                      # a sphere and bulb-640, 640x480
     python benchmarks/host_time.py SCENE.frac --rounds 41
@@ -83,17 +85,21 @@ def measure(name: str, scene, width: int, height: int, rounds: int) -> dict:
     for warm in (render, kernel_only):
         warm()
     times = {"render": [], "kernel": []}
+    cpu = {"render": [], "kernel": []}     # the calling thread's
     for _ in range(rounds):
         for key, work in (("render", render), ("kernel", kernel_only)):
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), time.thread_time()
             work()
             times[key].append(time.perf_counter() - start)
+            cpu[key].append(time.thread_time() - start_cpu)
     render_ms, kernel_ms = (1000 * statistics.median(times[k]) for k in ("render", "kernel"))
+    host_ms = 1000 * statistics.median(r - k for r, k in zip(times["render"], times["kernel"]))
+    host_cpu_ms = 1000 * statistics.median(r - k for r, k in zip(cpu["render"], cpu["kernel"]))
     result = {"scene": name, "width": width, "height": height, "rounds": rounds, "device": scene.device.info.name,
-              "render_ms": round(render_ms, 3), "kernel_ms": round(kernel_ms, 3),
-              "host_ms": round(render_ms - kernel_ms, 3)}
-    print(f"{name}: Scene.render {render_ms:.3f} ms, kernel alone {kernel_ms:.3f} ms, "
-          f"host {render_ms - kernel_ms:.3f} ms (medians of {rounds})")
+              "render_ms": round(render_ms, 3), "kernel_ms": round(kernel_ms, 3), "host_ms": round(host_ms, 3),
+              "host_cpu_ms": round(host_cpu_ms, 3)}
+    print(f"{name}: Scene.render {render_ms:.3f} ms, kernel alone {kernel_ms:.3f} ms, host {host_ms:.3f} ms, "
+          f"host CPU {host_cpu_ms:.3f} ms (medians of {rounds})")
     return result
 
 

@@ -181,10 +181,13 @@ class RenderKernel:
         self.grid = Grid.of(device, lanes)
         self._params, self._camera = _Uniforms(device, double), _Uniforms(device, double)
 
-    def _launch(self, global_size, out, frame: Frame, params, x0: int, y0: int, pitch: int):
+    def _uniforms(self, frame: Frame, params) -> tuple:
+        """The params' and camera's buffers, holding the values of this frame."""
+        return self._params.buffer_of(params), self._camera.buffer_of(frame.camera)
+
+    def _launch(self, global_size, out, uniforms: tuple, frame: Frame, x0: int, y0: int, pitch: int):
         return self.kernel(self.device.queue, global_size, self.grid.group,
-                           *render_arguments(out, self._params.buffer_of(params), self._camera.buffer_of(frame.camera),
-                                             frame, x0, y0, pitch))
+                           *render_arguments(out, *uniforms, frame, x0, y0, pitch))
 
     def render(self, frame: Frame, params, progress: Callable[[int], None] | None = None,
                channels: tuple[str, ...] = CHANNELS) -> np.ndarray:
@@ -201,12 +204,13 @@ class RenderKernel:
             # the kernel writes into `image` itself where the device can (CPUs):
             # no copy; mapping it at the end makes its contents current anywhere
             out = cl.Buffer(self.device.context, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=image)
+            uniforms = self._uniforms(frame, params)
             queued = deque()    # (launch event, pixels) of the tiles in flight
             try:
                 for y0 in range(0, rows, tile_height):
                     for x0 in range(0, pitch, tile_width):
                         columns, lines = min(tile_width, pitch - x0), min(tile_height, rows - y0)
-                        event = self._launch(grid.items(columns, lines), out, frame, params, x0, y0, pitch)
+                        event = self._launch(grid.items(columns, lines), out, uniforms, frame, x0, y0, pitch)
                         queued.append((event, max(0, min(columns, width - x0)) * max(0, min(lines, height - y0))))
                         # a few tiles ahead keep the device busy while we
                         # report progress; an interrupt waits for those few
@@ -240,8 +244,9 @@ class RenderKernel:
         tile = np.empty((bottom - top, pitch, len(channels)), dtype=np.float32)
         with _guard("rendering"):
             out = cl.Buffer(self.device.context, cl.mem_flags.WRITE_ONLY, bottom * pitch * len(channels) * 4)
+            uniforms = self._uniforms(frame, params)
             for x0 in range(0, pitch, launch_width):
-                self._launch(grid.items(min(launch_width, pitch - x0), bottom - top), out, frame, params, x0, top,
+                self._launch(grid.items(min(launch_width, pitch - x0), bottom - top), out, uniforms, frame, x0, top,
                              pitch)
             cl.enqueue_copy(self.device.queue, tile, out, src_offset=top * pitch * len(channels) * 4,
                             is_blocking=True)
