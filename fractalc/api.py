@@ -92,7 +92,8 @@ class Scene:
         self.lanes = lanes      # rays per work-item; None: the device's (fractalc/lanes.py)
         self.checked = replace(checked, render=replace(checked.render, precision=precision))
         self.device_spec = None if device is None else str(device)
-        self._programs: dict = {}    # (compiled settings, aperture, target) -> render kernel; distance programs
+        # (compiled settings, aperture or not, target) -> the RenderKernel; ("distance", ...) -> the estimate's program
+        self._programs: dict = {}
         self._device = None          # opened on first use
         self._targets: dict[str, Target] = {}    # precision -> the kernels' target on the device
         self.params = {p.name: p.default for p in checked.params}
@@ -406,7 +407,7 @@ class Renderer:
         return {
             "version": __version__, "scene_file": scene.checked.file, "scene_sha256": scene.source_sha256,
             **view,
-            "params": " ".join(f"{k}={v:g}" for k, v in scene.params.items()),
+            "params": " ".join(f"{p.name}={v:g}" for p, v in zip(scene.checked.params, self.params)),
             "precision": settings.precision,
             "device": scene.device.info.name,
             "render_seconds": f"{seconds:.6f}",   # a small frame takes under a millisecond

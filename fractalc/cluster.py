@@ -6,9 +6,10 @@ process loads the scene, opens its OpenCL device and builds the kernel
 once, and keeps them for the tasks after (`_worker_scene`). A task renders
 through the scene's public seam (`Scene.renderer`); an animation's frame
 tasks are fractalc/animate.py's, run by `Job` and `on_worker`. Workers
-return pixels; the client alone writes files, each frame atomically, as its task
-finishes, so a frame is written once even when Dask reruns the tasks of a
-worker that died, and an interrupted client leaves only whole frames.
+return pixels; the client alone writes files, each frame atomically, as
+its task finishes, so a frame is written once even when Dask reruns the
+tasks of a worker that died, and an interrupted client leaves only whole
+frames.
 Frames and tiles equal a local render of them bit for bit on the same
 kind of device: sampling is seeded per pixel of the whole frame.
 
@@ -174,8 +175,8 @@ def scene_spec(scene, render_keys: dict) -> SceneSpec:
     # lanes given here ($FRACTALC_LANES too) travel; otherwise each worker's device chooses
     lanes = scene.lanes or (parse_lanes(os.environ[ENVIRONMENT], ENVIRONMENT)
                             if os.environ.get(ENVIRONMENT) else None)
-    return SceneSpec(type(scene), scene.checked.source, scene.checked.file, tuple(scene.params.items()), scene.precision,
-                     scene.device_spec, lanes, keys)
+    return SceneSpec(type(scene), scene.checked.source, scene.checked.file, tuple(scene.params.items()),
+                     scene.precision, scene.device_spec, lanes, keys)
 
 
 @dataclass(frozen=True)
