@@ -36,8 +36,8 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 
 from .arguments import checked
-from .cache import cache_dir
 from .check import check
+from .drivers import building_marker
 from .errors import RenderError
 from .image import Image, image_from_pixels, require_image_memory
 from .lanes import ENVIRONMENT, parse_lanes
@@ -208,7 +208,7 @@ def _unmark_at_exit() -> None:
     next fractalc process would clear the kernel cache as after a crash:
     remove it at the worker's normal exit instead."""
     from multiprocessing.util import Finalize
-    marker = cache_dir() / "building" / str(os.getpid())
+    marker = building_marker(os.getpid())
     Finalize(None, marker.unlink, kwargs={"missing_ok": True}, exitpriority=0)
 
 
