@@ -14,12 +14,13 @@ import dataclasses
 import re
 from dataclasses import dataclass
 
-from . import __version__, ir, pathtrace
+from . import ir, pathtrace
 from .lower import POINT, SceneIR
 from .schedule import ForBlock, Hoist, IfBlock, schedule, varying
 from .passes import PASSES, channels
 from .program import Light
 from .stdlib import library
+from .version import __version__
 
 AMBIENT = 0.25          # ambient light, times the material's colour and AO
 AO_DELTA = 0.05         # spacing of the AO samples along the normal
