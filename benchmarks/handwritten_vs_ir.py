@@ -16,16 +16,15 @@ import numpy as np
 import fractalc
 from fractalc import build, run
 scene = fractalc.load(str(Path(__file__).resolve().parent.parent.parent / "shared/bench/bulb-640.frac"), lanes=16)
-settings = scene.checked.render
-frame = run.Frame(settings.width, settings.height, settings.samples, 0, run.camera_block(scene.checked.camera))
-programs = {name: build.build(open(path).read(), scene.device) for name, path in
-            (("hand-written", sys.argv[1]), ("IR loops", sys.argv[2]))}
-times = {name: [] for name in programs}
+renderer = scene.renderer()
+kernels = {name: run.RenderKernel(build.build(open(path).read(), scene.device), scene.device, 16, False)
+           for name, path in (("hand-written", sys.argv[1]), ("IR loops", sys.argv[2]))}
+times = {name: [] for name in kernels}
 images = {}
 for round_ in range(int(sys.argv[3])):
-    for name, program in programs.items():
+    for name, kernel in kernels.items():
         start = time.perf_counter()
-        images[name] = run.render(program, scene.device, frame, scene._param_values(), 16, False).copy()
+        images[name] = kernel.render(renderer.frame, renderer.params)
         times[name].append(time.perf_counter() - start)
 for name, t in times.items():
     print(f"{name:13s} min {min(t)*1e3:.1f} ms  median {statistics.median(t)*1e3:.1f} ms  ({len(t)} renders)")

@@ -32,11 +32,10 @@ from pathlib import Path
 import fractalc
 import fractalc.stdlib as stdlib
 from fractalc import count, run
-from fractalc.api import image_from_pixels
+from fractalc.image import image_from_pixels
 from fractalc.build import build
 from fractalc.emit import emit
 from fractalc.lower import lower
-from fractalc.passes import channels
 from fractalc.sweep import compare, reference_settings, scene_settings
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -71,20 +70,20 @@ def using_library(folder: Path):
 
 
 class Kernel:
-    """A scene's render kernel built from one library, with its settings."""
+    """A scene's render kernel built from one library, with the scene's
+    settings changed by `render_keys`."""
 
-    def __init__(self, scene, folder: Path, settings, width: int, height: int):
-        self.scene, self.settings = scene, settings
-        self.target = scene._target(settings)
+    def __init__(self, scene, folder: Path, render_keys: dict, width: int, height: int):
+        self.renderer = scene.renderer(**render_keys)
+        target = self.renderer.target
         with using_library(folder):
-            source = emit(lower(replace(scene.checked, render=settings)), self.target)
-        self.program = build(source, scene.device)
-        self.frame = run.Frame(width, height, settings.samples, 0, run.camera_block(scene.checked.camera))
+            source = emit(lower(replace(scene.checked, render=self.renderer.settings)), target)
+        self.kernel = run.RenderKernel(build(source, scene.device), scene.device, target.lanes, target.double)
+        self.frame = replace(self.renderer.frame, width=width, height=height)
 
     def render(self):
-        pixels = run.render(self.program, self.scene.device, self.frame, self.scene._param_values(),
-                            self.target.lanes, self.target.double, channels=channels(self.settings.aovs))
-        return image_from_pixels(pixels, self.settings.aovs, {})
+        pixels = self.kernel.render(self.frame, self.renderer.params, channels=self.renderer.channels)
+        return image_from_pixels(pixels, self.renderer.settings.aovs, {})
 
 
 def main() -> None:
@@ -103,9 +102,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as scratch:
         folders = {"old": library_dir(args.old, Path(scratch)), "new": library_dir(args.new, Path(scratch), args.patch)}
         settings = scene.checked.render
-        reference = Kernel(scene, folders["old"], scene._settings(reference_settings(scene_settings(scene))),
+        reference = Kernel(scene, folders["old"], reference_settings(scene_settings(scene)),
                            width, height).render()
-        kernels = {name: Kernel(scene, folder, settings, width, height) for name, folder in folders.items()}
+        kernels = {name: Kernel(scene, folder, {}, width, height) for name, folder in folders.items()}
         counts = {}
         for name, folder in folders.items():
             with using_library(folder):

@@ -19,10 +19,12 @@ import sys
 
 import numpy as np
 
-from . import __version__
 from .api import Scene
+from .arguments import checked, require_type
+from .cluster import Done, Job, on_worker, scene_spec
 from .errors import RenderError
 from .paths import camera_at, frame_times, params_at
+from .version import __version__
 from .write import DEFAULT_TONE_CURVE, linear_to_srgb, replacing, tone_mapped
 
 
@@ -37,7 +39,6 @@ def check_pattern(pattern) -> str:
     one whole-number conversion (%d, %04d, %i or %u; `%%` for a percent
     sign), in the file's name (frames share one folder), and an .exr or
     .png name without control characters; ValueError saying what is wrong."""
-    from .arguments import require_type
     require_type("the frames' pattern", pattern, (str, os.PathLike), "a file name with %d, e.g. frames/f_%04d.png")
     pattern = os.fspath(pattern)
     example = "e.g. frames/frame_%04d.png"
@@ -71,9 +72,9 @@ def _frame_settings(scene: Scene, fps: float, seed: int, render_keys: dict) -> s
     precision, ...), fps, seed and the fractalc version."""
     settings = {
         "fractalc": __version__,
-        "scene_sha256": hashlib.sha256(scene.checked.source.encode()).hexdigest(),
+        "scene_sha256": scene.source_sha256,
         "params": scene.params,
-        "render": dataclasses.asdict(scene._settings(render_keys)),
+        "render": dataclasses.asdict(scene.render_settings(**render_keys)),
         "camera": dataclasses.asdict(scene.checked.camera),    # the file's, or --camera's
         "fps": fps,
         "seed": seed,
@@ -125,7 +126,6 @@ def _frame_range(frames) -> tuple[int, int | None]:
     """`frames` (first, last or None: to the end), checked; all frames for None."""
     if frames is None:
         return 0, None
-    from .arguments import require_type
     takes = "a pair (first, last) of frame numbers from 0, last None for the end"
     require_type("frames", frames, (tuple, list), takes)
     if len(frames) != 2:
@@ -145,7 +145,6 @@ def plan_frames(scene: Scene, pattern: str, fps: float, seed: int, overwrite: bo
     from the same scene text and settings (all of them with `overwrite`),
     among `frames` (first, last or None: the end) if given, so that
     machines can share an animation; makes the frames' folder."""
-    from .arguments import checked, require_type
     pattern = check_pattern(pattern)
     require_type("seed", seed, int, "a whole number")
     seed = checked("seed", seed)
@@ -194,8 +193,8 @@ def render_frames(scene: Scene, pattern: str, fps: float, seed: int = 0, overwri
         if frames is not None:
             raise ValueError("--frames is for sharing an animation between machines without a cluster; "
                              "a cluster shares the frames itself")
-        from .cluster import render_frames as render_on_cluster
-        return render_on_cluster(scene, pattern, fps, cluster, seed, overwrite, progress, **render_keys)
+        return _render_on_cluster(scene, plan_frames(scene, pattern, fps, seed, overwrite, render_keys), cluster,
+                                  seed, progress, render_keys)
     from tqdm import tqdm
     plan = plan_frames(scene, pattern, fps, seed, overwrite, render_keys, frames)
     original = dict(scene.params)
@@ -210,6 +209,24 @@ def render_frames(scene: Scene, pattern: str, fps: float, seed: int = 0, overwri
         bar.close()
         scene.set_params(original)
     return files, len(plan.missing)
+
+
+def frame_task(spec, path, at: float, seed: int) -> Done:
+    """On a worker of a render farm (fractalc/cluster.py): the frame at
+    time `at` on the camera `path` of the scene of `spec` (a SceneSpec)."""
+    return on_worker(spec, lambda scene, keys: render_frame(scene, path, at, seed, keys))
+
+
+def _render_on_cluster(scene: Scene, plan: FramePlan, client, seed: int, progress: bool,
+                       render_keys: dict) -> tuple[list[str], int]:
+    """The frames of `plan` not on disk yet rendered by the workers of
+    `client` (a distributed.Client), each written here as it arrives."""
+    spec = scene_spec(scene, render_keys)
+    job = Job(client, len(plan.files), len(plan.files) - len(plan.missing), "frame", progress)
+    job.run(((index, frame_task, (spec, plan.path, float(plan.times[index]), seed)) for index in plan.missing),
+            lambda index, image: save_frame(image, plan, index))
+    job.report()
+    return plan.files, len(plan.missing)
 
 
 def _display_pixels(file: str) -> np.ndarray:

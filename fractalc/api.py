@@ -5,95 +5,48 @@
 `load`/`loads` run the first three stages at once (so scene errors surface
 immediately); the kernel is emitted and built on first use, per render
 settings, and reused while only params, size, samples or seed change.
+A render is prepared by `Scene.renderer` (a `Renderer`: settings, camera,
+frame, params, target, metadata) and run whole or a block of rows at a
+time: the seam that `Scene.render`, the render farm (fractalc/cluster.py),
+animations and the evaluation counter (fractalc/count.py) share.
 """
 from __future__ import annotations
 
 import hashlib
 import os
 import time
-from collections.abc import Mapping
-from dataclasses import dataclass, field, fields, replace
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, fields, replace
+from functools import lru_cache
 
 import numpy as np
 
-from . import __version__, pathtrace, program, run
+from . import pathtrace, program, run
 from .arguments import checked, require_type
 from .build import build
-from .devices import open_device
-from .denoise import denoise_image, require_denoiser
 from .check import check, check_param_values, check_value, unknown_param
+from .cluster import render_still
+from .denoise import denoise_image, require_denoiser
+from .devices import open_device
 from .emit import Target, emit, emit_distance, uniform_source
 from .errors import RenderError, SceneError, diagnostic
+from .image import Image, image_from_pixels, require_image_memory
 from .lanes import CHOICES as LANE_CHOICES
 from .lower import lower
-from .memory import require_memory
+from .mesh import mesh
 from .parse import parse
 from .passes import PASSES, channels
 from .program import CAMERA_KEYS, RENDER_KEYS, Camera, CheckedScene, Precision, RenderSettings
 from .source import read_scene_file
 from .types import FLOAT_MAX, in_float_range
-from .write import COMPRESSIONS, write
+from .version import __version__
 
 PRECISIONS = tuple(Precision)
+SETTING_NAMES = frozenset(f.name for f in fields(RenderSettings))
 # change without rebuilding (exposure and tonemap: only PNG writing reads them)
-_RUNTIME_KEYS = {name for name, key in RENDER_KEYS.items() if key.runtime}
+_RUNTIME_DEFAULTS = {name: getattr(RenderSettings(), name) for name, key in RENDER_KEYS.items() if key.runtime}
 CAMERA_BASE = program.Camera    # a file's camera and a fractalc.Camera made from Python alike
 SCENE_TEXT_LIMIT = 64 * 1024   # longer scene text is left out of the metadata (its sha256 and path stay)
-
-
-@dataclass(frozen=True)
-class Image:
-    """A rendered image: linear colour, coverage alpha and the AOVs of the
-    pixel-centre rays (docs/compositing.md)."""
-    rgba: np.ndarray        # (H, W, 4) float32, linear; A: the coverage by hits
-    depth: np.ndarray       # (H, W) ray distance, +inf where the ray missed
-    normal: np.ndarray      # (H, W, 3) world-space normal (0 on misses)
-    steps: np.ndarray       # (H, W) march steps
-    metadata: dict = field(default_factory=dict)
-    passes: dict = field(default_factory=dict)   # pass name (passes.PASSES) -> (H, W, channels) array
-
-    def planes(self) -> dict[str, np.ndarray]:
-        """Channel name -> (H, W) array, in the EXR's channel order."""
-        planes = {c: self.rgba[..., i] for i, c in enumerate("RGBA")}
-        planes["Z"] = self.depth
-        planes.update({f"N.{c}": self.normal[..., i] for i, c in enumerate("xyz")})
-        planes["steps"] = self.steps
-        for name, names in PASSES.items():
-            if name in self.passes:
-                planes.update({c: self.passes[name][..., i] for i, c in enumerate(names)})
-        return planes
-
-    def save(self, path: str | os.PathLike, half: bool = False, compression: str = "zip", bits: int = 8) -> None:
-        """Write EXR (linear, all channels, camera matrices, metadata; `half`
-        floats, `compression`) or PNG (sRGB, `bits` 8 or 16, straight alpha)."""
-        require_type("path", path, (str, os.PathLike), "a file name (str or pathlib.Path)")
-        require_type("compression", compression, str, f"a compression's name ({', '.join(COMPRESSIONS)})")
-        require_type("bits", bits, int, "8 or 16")
-        write(os.fspath(path), self.planes(), self.metadata, half=bool(half), compression=compression, bits=bits)
-
-    def __repr__(self) -> str:
-        height, width = self.depth.shape
-        return f"<Image {width}x{height}, channels {' '.join(self.planes())}>"
-
-    def _repr_png_(self) -> bytes:
-        """Notebooks show the image: its sRGB PNG, as `save` writes it."""
-        import tempfile
-        with tempfile.TemporaryDirectory() as folder:
-            path = os.path.join(folder, "image.png")
-            self.save(path)
-            with open(path, "rb") as f:
-                return f.read()
-
-
-def image_from_pixels(pixels: np.ndarray, aovs: tuple[str, ...], metadata: dict) -> Image:
-    """The Image of a render's (H, W, channels) pixels (run.CHANNELS, then
-    the `aovs` passes' channels): views of them, no copies."""
-    passes, first = {}, len(run.CHANNELS)
-    for name in aovs:
-        count = len(PASSES[name])
-        passes[name] = pixels[..., first:first + count]
-        first += count
-    return Image(pixels[..., 0:4], pixels[..., 4], pixels[..., 5:8], pixels[..., 8], metadata, passes)
 
 
 @dataclass(frozen=True)
@@ -133,7 +86,10 @@ class Scene:
         self.lanes = lanes      # rays per work-item; None: the device's (fractalc/lanes.py)
         self.checked = replace(checked, render=replace(checked.render, precision=precision))
         self.device_spec = None if device is None else str(device)
-        self._programs: dict = {}    # (compiled settings, lens, target), or the distance program's key -> program
+        # (compiled settings, aperture or not, target) -> the RenderKernel; ("distance", ...) -> the estimate's program
+        self._programs: dict = {}
+        self._device = None          # opened on first use
+        self._targets: dict[str, Target] = {}    # precision -> the kernels' target on the device
         self.params = {p.name: p.default for p in checked.params}
         self.set_params({} if params is None else params)
 
@@ -184,11 +140,18 @@ class Scene:
     def _param_values(self) -> list[float]:
         return [self.params[p.name] for p in self.checked.params]
 
+    @property
+    def source_sha256(self) -> str:
+        """The sha256 of the scene's text (in every image's metadata)."""
+        return _sha256(self.checked.source)
+
     # ---- compiling ---------------------------------------------------------
 
     @property
     def device(self):
-        return open_device(self.device_spec)
+        if self._device is None:
+            self._device = open_device(self.device_spec)
+        return self._device
 
     @property
     def precision(self) -> str:
@@ -200,10 +163,13 @@ class Scene:
         double = settings.precision == "double"
         if lanes is not None:
             return Target(lanes=lanes, double=double)
-        device = self.device
-        if double and not device.info.double:
-            raise RenderError(f"the OpenCL device '{device.info.name}' does not support double precision")
-        return Target(lanes=self.lanes_in_use, double=double, exact_native=device.lane_choice.native_exact)
+        if settings.precision not in self._targets:     # the device's lane choice, read once
+            device = self.device
+            if double and not device.info.double:
+                raise RenderError(f"the OpenCL device '{device.info.name}' does not support double precision")
+            self._targets[settings.precision] = Target(lanes=self.lanes_in_use, double=double,
+                                                       exact_native=device.lane_choice.native_exact)
+        return self._targets[settings.precision]
 
     @property
     def lanes_in_use(self) -> int:
@@ -213,43 +179,46 @@ class Scene:
     def kernel_source(self, lanes: int | None = None, **render_keys) -> str:
         """The standalone OpenCL C source (no includes) for this scene."""
         _check_lanes(lanes)
-        settings = self._settings(render_keys)
+        settings = self.render_settings(**render_keys)
         scene = replace(self.checked, render=settings)
         return emit(lower(scene), self._target(settings, lanes))
 
     def compile(self, use_cache: bool = True, **render_keys):
         """Build the render kernel now (it is otherwise built on first use);
         `use_cache=False` compiles even if this process built it before."""
-        settings = self._settings(render_keys)
-        return self._program(settings, use_cache=use_cache)[0]
+        settings = self.render_settings(**render_keys)
+        return self._render_kernel(settings, self.checked.camera, self._target(settings), use_cache).program
 
-    def _program(self, settings: RenderSettings, camera: Camera | None = None, use_cache: bool = True):
+    def _render_kernel(self, settings: RenderSettings, camera: Camera, target: Target,
+                       use_cache: bool = True) -> run.RenderKernel:
+        """The render kernel of `settings` for `camera`, built once: frames
+        that change only runtime settings, the camera or params reuse it."""
         # Size, samples and the camera are kernel arguments: keep them out of
         # the source (only whether the lens has an aperture shapes the kernel).
-        compiled = replace(settings, **{k: getattr(RenderSettings(), k) for k in _RUNTIME_KEYS})
-        lens = Camera(aperture=1.0 if (camera or self.checked.camera).aperture > 0 else 0.0)
-        target = self._target(settings)
-        key = (compiled, lens, target)
+        key = (_compiled(settings), camera.aperture > 0, target)
         if use_cache and key in self._programs:
-            return self._programs[key], target   # no lowering or emitting per frame
-        source = emit(lower(replace(self.checked, render=compiled, camera=lens)), target)
-        self._programs[key] = build(source, self.device, use_cache=use_cache)
-        return self._programs[key], target
+            return self._programs[key]   # no lowering or emitting per frame
+        lens = Camera(aperture=1.0 if camera.aperture > 0 else 0.0)
+        source = emit(lower(replace(self.checked, render=key[0], camera=lens)), target)
+        self._programs[key] = run.RenderKernel(build(source, self.device, use_cache=use_cache), self.device,
+                                               target.lanes, target.double)
+        return self._programs[key]
 
     def set_defaults(self, camera: Camera | None = None, **render_keys) -> None:
         """Replace the file's camera and render settings (any render key,
         checked as `render` checks it) for every later render."""
         if camera is not None:
             require_type("camera", camera, CAMERA_BASE, "a fractalc.Camera")
-        self.checked = replace(self.checked, render=self._settings(render_keys),
+        self.checked = replace(self.checked, render=self.render_settings(**render_keys),
                                camera=camera or self.checked.camera)
 
-    def _settings(self, overrides: dict) -> RenderSettings:
+    def render_settings(self, **render_keys) -> RenderSettings:
+        """The scene's render settings with `render_keys` (any render key;
+        None keeps the scene's), each checked as `render` checks it."""
         settings = self.checked.render
-        names = {f.name for f in fields(RenderSettings)}
-        for key, value in overrides.items():
-            if key not in names:
-                raise ValueError(f"unknown render setting '{key}' (known: {', '.join(sorted(names))})")
+        for key, value in render_keys.items():
+            if key not in SETTING_NAMES:
+                raise ValueError(f"unknown render setting '{key}' (known: {', '.join(sorted(SETTING_NAMES))})")
             if value is None:
                 continue
             if key == "environment_map":    # not a file's key: an image file, the sky
@@ -327,7 +296,6 @@ class Scene:
         `resolution` cells along the longest side of `bounds` (xmin, ymin,
         zmin, xmax, ymax, zmax; default: around the scene's bound, which an
         unbounded scene lacks). Needs the 'mesh' extra (scikit-image)."""
-        from .mesh import mesh
         return mesh(self, resolution, bounds, progress)
 
     def render(self, seed: int = 0, progress=False, camera: Camera | None = None,
@@ -347,71 +315,168 @@ class Scene:
             require_denoiser()
             aovs = tuple(render_keys.pop("aovs", None) or ()) + ("albedo",)
             return denoise_image(self.render(seed, progress, camera, cluster, aovs=aovs, **render_keys))
-        require_type("seed", seed, (int, np.integer), "a whole number")
-        seed = checked("seed", seed)
-        if camera is not None:
-            require_type("camera", camera, CAMERA_BASE, "a fractalc.Camera")
         if cluster is not None:
             if not all(hasattr(cluster, name) for name in ("submit", "nthreads")):
                 raise TypeError(f"cluster must be a Dask client (distributed.Client), not {cluster!r:.60}")
-            from .cluster import render_still
-            return render_still(self, cluster, seed, camera, progress, **render_keys)
-        settings = self._settings(render_keys)
-        names = channels(settings.aovs)
-        require_image_memory(settings.width, settings.height, len(names), settings.integrator == "path")
-        camera = camera or self.checked.camera
-        program, target = self._program(settings, camera)
-        frame = run.Frame(settings.width, settings.height, settings.samples, seed,
-                          run.camera_block(camera))
-        path_traced = settings.integrator == "path"    # in passes of samples (pathtrace.pass_frames)
-        passes = len(pathtrace.pass_frames(frame)) if path_traced else 1
-        total = settings.width * settings.height * passes
+            return render_still(self, cluster, _checked_seed(seed, camera), camera, progress, **render_keys)
+        renderer = self.renderer(seed, camera, **render_keys)
+        settings = renderer.settings
+        require_image_memory(settings.width, settings.height, len(renderer.channels), renderer.path_traced)
+        renderer.kernel   # built before the clock starts
+        total = settings.width * settings.height * renderer.passes
         bar = run.ProgressReporter(progress, total) if callable(progress) else \
             run.terminal_progress(total) if progress else None
         start = time.perf_counter()
         try:
-            def render_frame(part):
-                return run.render(program, self.device, part, self._param_values(), target.lanes,
-                                  target.double, bar.update if bar else None, names)
-            pixels = pathtrace.render_passes(render_frame, frame) if path_traced else render_frame(frame)
+            pixels = renderer.pixels(bar.update if bar else None)
         except MemoryError:   # the host's image array: a runtime failure, in one line
             raise RenderError(f"out of memory for a {settings.width}x{settings.height} image") from None
         finally:
             if bar:
                 bar.close()
-        seconds = time.perf_counter() - start
-        return image_from_pixels(pixels, settings.aovs, self._metadata(settings, camera, seconds))
+        return renderer.image(pixels, time.perf_counter() - start)
 
-    def _metadata(self, settings: RenderSettings, camera: Camera, seconds: float) -> dict[str, str]:
-        vector = lambda v: " ".join(f"{x:g}" for x in v)  # noqa: E731
-        metadata = {
-            "version": __version__,
-            "scene_file": self.checked.file,
-            "scene_sha256": hashlib.sha256(self.checked.source.encode()).hexdigest(),
-            "camera.position": vector(camera.position), "camera.target": vector(camera.target),
-            "camera.up": vector(camera.up), "camera.fov": f"{camera.fov:g}",
-            "params": " ".join(f"{k}={v:g}" for k, v in self.params.items()),
+    def renderer(self, seed: int = 0, camera: Camera | None = None, **render_keys) -> Renderer:
+        """A render prepared with the file's settings overridden by
+        `render_keys` and its camera by `camera`, as `render` takes them:
+        a `Renderer`, which renders the frame whole or a block of its rows
+        at a time. Its kernel is built on first use."""
+        seed = _checked_seed(seed, camera)
+        settings = self.render_settings(**render_keys)
+        return Renderer(self, settings, camera or self.checked.camera, seed, self._target(settings))
+
+
+class Renderer:
+    """One render of a scene, prepared (`Scene.renderer`): its settings,
+    camera, channels, frame (size, samples, seed, camera block), param
+    values and kernel target. The whole frame (`pixels`) and any block of
+    its rows (`rows`) give the same pixels bit for bit, sampling being
+    seeded per pixel of the whole frame."""
+
+    def __init__(self, scene: Scene, settings: RenderSettings, camera: Camera, seed: int, target: Target):
+        self.scene, self.settings, self.camera, self.target = scene, settings, camera, target
+        self.channels = _channels(settings.aovs)
+        self.frame = run.Frame(settings.width, settings.height, settings.samples, seed, run.camera_block(camera))
+        self.params = scene._param_values()
+        self.path_traced = settings.integrator == "path"    # in passes of samples (pathtrace.pass_frames)
+
+    @property
+    def kernel(self) -> run.RenderKernel:
+        """The scene's render kernel for these settings, built on first use."""
+        return self.scene._render_kernel(self.settings, self.camera, self.target)
+
+    @property
+    def passes(self) -> int:
+        """The launches over the whole frame: the path tracer's passes, else one."""
+        return len(pathtrace.pass_frames(self.frame)) if self.path_traced else 1
+
+    def pixels(self, progress: Callable[[int], None] | None = None) -> np.ndarray:
+        """The frame: an (H, W, channels) float32 array (run.CHANNELS, then
+        the passes' channels); `progress(pixels)` after each tile."""
+        kernel = self.kernel
+
+        def render_pass(frame):
+            return kernel.render(frame, self.params, progress, self.channels)
+        return pathtrace.render_passes(render_pass, self.frame) if self.path_traced else render_pass(self.frame)
+
+    def rows(self, first: int, count: int) -> np.ndarray:
+        """Rows `first` to `first + count - 1` of the frame: a (count, W,
+        channels) float32 array, equal to those rows of `pixels`."""
+        kernel = self.kernel
+
+        def render_pass(frame):
+            return kernel.rows(frame, self.params, first, count, self.channels)
+        # the path tracer's passes, as a whole frame's: the same pixels
+        return pathtrace.render_passes(render_pass, self.frame) if self.path_traced else render_pass(self.frame)
+
+    def image(self, pixels: np.ndarray, seconds: float) -> Image:
+        """The Image of the frame's `pixels` (no copy), with its metadata."""
+        return image_from_pixels(pixels, self.settings.aovs, self.metadata(seconds))
+
+    def metadata(self, seconds: float) -> dict[str, str]:
+        """The image's metadata (docs/compositing.md), `seconds` its render time."""
+        scene, settings = self.scene, self.settings
+        view, matrices = _camera_metadata(self.camera, settings.width, settings.height)
+        return {
+            "version": __version__, "scene_file": scene.checked.file, "scene_sha256": scene.source_sha256,
+            **view,
+            "params": " ".join(f"{p.name}={v:g}" for p, v in zip(scene.checked.params, self.params)),
             "precision": settings.precision,
-            "device": self.device.info.name,
-            "render_seconds": f"{seconds:.3f}",
+            "device": scene.device.info.name,
+            "render_seconds": f"{seconds:.6f}",   # a small frame takes under a millisecond
             "rendered_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            # OpenEXR's standard camera attributes (write.MATRICES), row-major
-            "worldToCamera": " ".join(f"{x:.9g}" for x in run.world_to_camera(camera).flat),
-            "worldToNDC": " ".join(f"{x:.9g}" for x in
-                                   run.world_to_ndc(camera, settings.width, settings.height).flat),
-            "camera.projection": camera.projection, "camera.stereo": camera.stereo,
+            **matrices,
+            **_text_metadata(scene.checked.source),
+            **_settings_metadata(settings),
         }
-        if (camera.projection, camera.stereo) != ("pinhole", "none"):
-            del metadata["worldToNDC"]     # a single pinhole's projection, no other camera's
-        if len(self.checked.source.encode()) <= SCENE_TEXT_LIMIT:
-            metadata["scene_text"] = self.checked.source
-        for f in fields(RenderSettings):
-            value = getattr(settings, f.name)
-            if f.name == "aovs":
-                metadata["render.aovs"] = " ".join(value)
-            else:
-                metadata[f"render.{f.name}"] = vector(value) if isinstance(value, tuple) else str(value)
-        return metadata
+
+
+def _vector(v) -> str:
+    return " ".join(f"{x:g}" for x in v)
+
+
+@lru_cache(maxsize=16)
+def _camera_metadata(camera: Camera, width: int, height: int) -> tuple[dict[str, str], dict[str, str]]:
+    """A camera's entries in an image's metadata: its view, then OpenEXR's
+    standard camera attributes (write.MATRICES), row-major, and its
+    projection (entries a frame's metadata reads, never changes)."""
+    view = {"camera.position": _vector(camera.position), "camera.target": _vector(camera.target),
+            "camera.up": _vector(camera.up), "camera.fov": f"{camera.fov:g}"}
+    matrices = {"worldToCamera": " ".join(f"{x:.9g}" for x in run.world_to_camera(camera).flat)}
+    if (camera.projection, camera.stereo) == ("pinhole", "none"):   # a single pinhole's projection, no other's
+        matrices["worldToNDC"] = " ".join(f"{x:.9g}" for x in run.world_to_ndc(camera, width, height).flat)
+    matrices.update({"camera.projection": camera.projection, "camera.stereo": camera.stereo})
+    return view, matrices
+
+
+@lru_cache(maxsize=16)
+def _text_metadata(source: str) -> dict[str, str]:
+    """The scene text's entry in the metadata, if it is short enough."""
+    return {"scene_text": source} if len(source.encode()) <= SCENE_TEXT_LIMIT else {}
+
+
+@lru_cache(maxsize=16)
+def _settings_metadata(settings: RenderSettings) -> dict[str, str]:
+    """The render settings' entries in the metadata."""
+    metadata = {}
+    for f in fields(RenderSettings):
+        value = getattr(settings, f.name)
+        if f.name == "aovs":
+            metadata["render.aovs"] = " ".join(value)
+        else:
+            metadata[f"render.{f.name}"] = _vector(value) if isinstance(value, tuple) else str(value)
+    return metadata
+
+
+@lru_cache(maxsize=16)
+def _sha256(text: str) -> str:
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+@lru_cache(maxsize=16)
+def _compiled(settings: RenderSettings) -> RenderSettings:
+    """`settings` with the runtime keys at their defaults: the settings the
+    kernel's source depends on."""
+    return replace(settings, **_RUNTIME_DEFAULTS)
+
+
+def _checked_seed(seed, camera) -> int:
+    """A render's `seed`, checked, once `camera` is checked to be a camera."""
+    require_type("seed", seed, (int, np.integer), "a whole number")
+    seed = _seed(seed)
+    if camera is not None:
+        require_type("camera", camera, CAMERA_BASE, "a fractalc.Camera")
+    return seed
+
+
+@lru_cache(maxsize=64)    # an animation's seed, checked once (an error is never kept)
+def _seed(seed) -> int:
+    return checked("seed", seed)
+
+
+@lru_cache(maxsize=16)
+def _channels(aovs: tuple[str, ...]) -> tuple[str, ...]:
+    return channels(aovs)
 
 
 def _check_lanes(lanes) -> None:
@@ -419,19 +484,6 @@ def _check_lanes(lanes) -> None:
         require_type("lanes", lanes, int, f"one of {', '.join(map(str, LANE_CHOICES))}")
         if lanes not in LANE_CHOICES:
             raise ValueError(f"lanes must be one of {', '.join(map(str, LANE_CHOICES))}, not {lanes!r}")
-
-
-# Bytes a pixel takes while rendering, beyond its channels' float32s: the
-# path tracer's double sums of colour and coverage, and a pass beside the first
-PATH_TRACED_PIXEL_BYTES = 4 * 8
-
-
-def require_image_memory(width: int, height: int, channel_count: int, path_traced: bool) -> None:
-    """Refuse an image that the machine's memory cannot hold (RenderError
-    naming its width and height), before any work: its float32 channels,
-    twice and its double sums where path-traced (fractalc.pathtrace)."""
-    pixel = 4 * channel_count * (2 if path_traced else 1) + (PATH_TRACED_PIXEL_BYTES if path_traced else 0)
-    require_memory(width * height * pixel, f"an image of width {width} and height {height} ({channel_count} channels)")
 
 
 def loads(text: str, params: dict | None = None, precision: str | None = None,

@@ -17,9 +17,8 @@ from contextlib import contextmanager, nullcontext
 
 from .errors import NoSceneFile, RenderError, SceneError
 from .passes import PASSES
-from .write import COMPRESSIONS, output_problem, replacing
+from .write import COMPRESSIONS, IMAGE_EXTENSIONS, output_problem, replacing
 
-IMAGE_EXTENSIONS = (".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff")
 
 
 class UsageError(Exception):
@@ -565,7 +564,7 @@ def command_mesh(args) -> int:
 def _parser() -> argparse.ArgumentParser:
     from .mesh import Shells
     parser = argparse.ArgumentParser(prog="fractalc", description="Compile and render .frac fractal scenes.")
-    from . import __version__
+    from .version import __version__
     parser.add_argument("--version", action="version", version=f"fractalc {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 

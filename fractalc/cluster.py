@@ -3,10 +3,13 @@ rendered by the workers of a Dask cluster (docs/cluster.md).
 
 Only the scene's text and settings travel (`SceneSpec`): each worker
 process loads the scene, opens its OpenCL device and builds the kernel
-once, and keeps them for the tasks after (`_worker_scene`). Workers return
-pixels; the client alone writes files, each frame atomically, as its task
-finishes, so a frame is written once even when Dask reruns the tasks of a
-worker that died, and an interrupted client leaves only whole frames.
+once, and keeps them for the tasks after (`_worker_scene`). A task renders
+through the scene's public seam (`Scene.renderer`); an animation's frame
+tasks are fractalc/animate.py's, run by `Job` and `on_worker`. Workers
+return pixels; the client alone writes files, each frame atomically, as
+its task finishes, so a frame is written once even when Dask reruns the
+tasks of a worker that died, and an interrupted client leaves only whole
+frames.
 Frames and tiles equal a local render of them bit for bit on the same
 kind of device: sampling is seeded per pixel of the whole frame.
 
@@ -32,10 +35,15 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from .api import Image, Scene, image_from_pixels, loads, require_image_memory
 from .arguments import checked
+from .check import check
+from .drivers import building_marker
 from .errors import RenderError
+from .image import Image, image_from_pixels, require_image_memory
+from .lanes import ENVIRONMENT, parse_lanes
 from .memory import require_memory
+from .parse import parse
+from .passes import channels
 
 MISSING_EXTRA = "--workers and --cluster need Dask's distributed: pip install 'fractalc[cluster]'"
 # A local worker's memory before it renders: its process (145 MB resident
@@ -146,8 +154,10 @@ def _ctrl_c_ignored():
 
 @dataclass(frozen=True)
 class SceneSpec:
-    """A scene as it travels to workers: its checked text, path (for
-    messages), params, precision, device choice and render settings."""
+    """A scene as it travels to workers: its class (fractalc.Scene, made
+    there from the checked text), text, path (for messages), params,
+    precision, device choice and render settings."""
+    scene_class: type
     text: str
     path: str
     params: tuple[tuple[str, float], ...]
@@ -157,17 +167,16 @@ class SceneSpec:
     render_keys: tuple[tuple[str, object], ...]
 
 
-def scene_spec(scene: Scene, render_keys: dict) -> SceneSpec:
-    """`scene` and the render settings to send; the settings are checked
-    here, before any work is sent."""
-    from .lanes import ENVIRONMENT, parse_lanes
-    scene._settings(render_keys)
+def scene_spec(scene, render_keys: dict) -> SceneSpec:
+    """`scene` (a fractalc.Scene) and the render settings to send; the
+    settings are checked here, before any work is sent."""
+    scene.render_settings(**render_keys)
     keys = tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in sorted(render_keys.items()))
     # lanes given here ($FRACTALC_LANES too) travel; otherwise each worker's device chooses
     lanes = scene.lanes or (parse_lanes(os.environ[ENVIRONMENT], ENVIRONMENT)
                             if os.environ.get(ENVIRONMENT) else None)
-    return SceneSpec(scene.checked.source, scene.checked.file, tuple(scene.params.items()), scene.precision,
-                     scene.device_spec, lanes, keys)
+    return SceneSpec(type(scene), scene.checked.source, scene.checked.file, tuple(scene.params.items()),
+                     scene.precision, scene.device_spec, lanes, keys)
 
 
 @dataclass(frozen=True)
@@ -185,10 +194,10 @@ _device_lock = threading.Lock()     # one render at a time per worker process: o
 
 
 @lru_cache(maxsize=8)
-def _worker_scene(text: str, path: str, precision: str, device: str | None, lanes: int | None) -> Scene:
+def _worker_scene(scene_class: type, text: str, path: str, precision: str, device: str | None, lanes: int | None):
     """The scene loaded once per worker process; it keeps its built kernels."""
     _unmark_at_exit()
-    return loads(text, precision=precision, device=device, path=path, lanes=lanes)
+    return scene_class(check(parse(text, path)), precision=precision, device=device, lanes=lanes)
 
 
 @lru_cache(maxsize=1)
@@ -199,17 +208,19 @@ def _unmark_at_exit() -> None:
     next fractalc process would clear the kernel cache as after a crash:
     remove it at the worker's normal exit instead."""
     from multiprocessing.util import Finalize
-    from .cache import cache_dir
-    marker = cache_dir() / "building" / str(os.getpid())
+    marker = building_marker(os.getpid())
     Finalize(None, marker.unlink, kwargs={"missing_ok": True}, exitpriority=0)
 
 
-def _on_worker(spec: SceneSpec, work: Callable[[Scene, dict], object]) -> Done:
+def on_worker(spec: SceneSpec, work: Callable[[object, dict], object]) -> Done:
+    """On a worker: `work(scene, render_keys)` on the spec's scene, loaded
+    once per process, with the spec's params; a RenderError names the
+    worker."""
     from distributed import get_worker
     with _device_lock:
         start = time.perf_counter()
         try:
-            scene = _worker_scene(spec.text, spec.path, spec.precision, spec.device, spec.lanes)
+            scene = _worker_scene(spec.scene_class, spec.text, spec.path, spec.precision, spec.device, spec.lanes)
             scene.set_params(dict(spec.params))
             value = work(scene, dict(spec.render_keys))
         except RenderError as error:
@@ -220,32 +231,14 @@ def _on_worker(spec: SceneSpec, work: Callable[[Scene, dict], object]) -> Done:
     raise RenderError(message)
 
 
-def _frame_task(spec: SceneSpec, path, at: float, seed: int) -> Done:
-    """The frame at time `at` on the camera `path`."""
-    from .animate import render_frame
-    return _on_worker(spec, lambda scene, keys: render_frame(scene, path, at, seed, keys))
-
-
 def _tile_task(spec: SceneSpec, seed: int, camera, first: int, count: int) -> Done:
     """Rows `first` .. `first + count - 1` of the still, and the image's
     metadata with the first tile."""
-    return _on_worker(spec, lambda scene, keys: _render_tile(scene, keys, seed, camera, first, count))
+    return on_worker(spec, lambda scene, keys: _render_tile(scene.renderer(seed, camera, **keys), first, count))
 
 
-def _render_tile(scene: Scene, render_keys: dict, seed: int, camera, first: int, count: int):
-    from . import pathtrace, run
-    from .passes import channels
-    settings = scene._settings(render_keys)
-    camera = camera or scene.checked.camera
-    program, target = scene._program(settings, camera)
-    frame = run.Frame(settings.width, settings.height, settings.samples, seed, run.camera_block(camera))
-
-    def render_part(part):
-        return run.render_rows(program, scene.device, part, scene._param_values(), target.lanes, target.double,
-                               first, count, channels(settings.aovs))
-    # the path tracer's passes, as a local render makes them: the same pixels
-    rows = pathtrace.render_passes(render_part, frame) if settings.integrator == "path" else render_part(frame)
-    return rows, (scene._metadata(settings, camera, 0.0) if first == 0 else None)
+def _render_tile(renderer, first: int, count: int):
+    return renderer.rows(first, count), (renderer.metadata(0.0) if first == 0 else None)
 
 
 # ---- on the client -------------------------------------------------------------
@@ -258,7 +251,7 @@ def worker_count(client) -> int:
     return max(1, len(client.nthreads()))     # worker address -> its threads
 
 
-class _Job:
+class Job:
     """Tasks sent with a bounded number in flight (so the client holds only
     a few results beyond its output), taken as they finish; one progress
     bar, and per-worker times for the summary."""
@@ -324,40 +317,24 @@ class _Job:
             print(self.summary(), file=sys.stderr)
 
 
-def render_frames(scene: Scene, pattern: str, fps: float, client, seed: int = 0, overwrite: bool = False,
-                  progress: bool = False, **render_keys) -> tuple[list[str], int]:
-    """`animate.render_frames` on the cluster of `client` (a
-    distributed.Client): the frames not on disk yet rendered by its
-    workers, each written here as it arrives. Returns the frame files and
-    how many were rendered now."""
-    from .animate import plan_frames, save_frame
-    plan = plan_frames(scene, pattern, fps, seed, overwrite, render_keys)
-    spec = scene_spec(scene, render_keys)
-    job = _Job(client, len(plan.files), len(plan.files) - len(plan.missing), "frame", progress)
-    job.run(((index, _frame_task, (spec, plan.path, float(plan.times[index]), seed)) for index in plan.missing),
-            lambda index, image: save_frame(image, plan, index))
-    job.report()
-    return plan.files, len(plan.missing)
-
-
-def render_still(scene: Scene, client, seed: int = 0, camera=None, progress: bool = False,
+def render_still(scene, client, seed: int = 0, camera=None, progress: bool = False,
                  tile_rows: int | None = None, **render_keys) -> Image:
-    """`Scene.render` on the cluster of `client`: tiles of `tile_rows` rows
+    """`Scene.render` of `scene` (a fractalc.Scene) on the cluster of
+    `client`: tiles of `tile_rows` rows
     (default: enough tiles for 4 per worker, whole lane blocks, at most
     TILE_ROWS) rendered by its workers, assembled here into the image as
     they arrive (the client holds the image and a few tiles)."""
-    from .passes import channels
     if tile_rows is not None:
         tile_rows = checked("tile_rows", tile_rows)
     spec = scene_spec(scene, render_keys)
-    settings = scene._settings(render_keys)
+    settings = scene.render_settings(**render_keys)
     height, width = settings.height, settings.width
     require_image_memory(width, height, len(channels(settings.aovs)), path_traced=False)   # tiles arrive summed
     if tile_rows is None:
         share = -(-height // (4 * worker_count(client)))
         tile_rows = min(TILE_ROWS, -(-share // BLOCK_ROWS) * BLOCK_ROWS)
     starts = range(0, height, tile_rows)
-    job = _Job(client, len(starts), 0, "tile", progress)
+    job = Job(client, len(starts), 0, "tile", progress)
     assembled: dict = {}
 
     def take(first: int, value) -> None:
@@ -374,5 +351,5 @@ def render_still(scene: Scene, client, seed: int = 0, camera=None, progress: boo
     job.run(((first, _tile_task, (spec, seed, camera, first, min(tile_rows, height - first))) for first in starts),
             take)
     job.report()
-    metadata = {**assembled["metadata"], "render_seconds": f"{time.perf_counter() - job.start:.3f}"}
+    metadata = {**assembled["metadata"], "render_seconds": f"{time.perf_counter() - job.start:.6f}"}
     return image_from_pixels(assembled["pixels"], settings.aovs, metadata)

@@ -19,11 +19,11 @@ import time
 from dataclasses import dataclass, replace
 
 from . import run
+from .bench import aligned
 from .build import build
 from .emit import double_literals, emit
 from .hoist import DERIVED_SLOTS
 from .lower import lower
-from .passes import channels
 from .resources import resource_dir
 
 # the kernel's purposes, in the order of stdlib_cl/count.cl's COUNT_ constants
@@ -130,17 +130,16 @@ def count(scene, width: int | None = None, height: int | None = None, camera=Non
     settings unless given), by purpose, and the formula iterations in them;
     with `timed_frames`, the median time of that many renders of the same
     view with the normal kernel (after one that builds it)."""
-    settings = scene.checked.render
+    renderer = scene.renderer(camera=camera)    # the file's settings: its size only in the frame
+    settings, params = renderer.settings, renderer.params
     width, height = width or settings.width, height or settings.height
-    camera = camera or scene.checked.camera
-    target = replace(scene._target(settings), count=True)
-    emitted = emit(lower(replace(scene.checked, render=settings, camera=camera)), target)
-    params = scene._param_values()
+    target = replace(renderer.target, count=True)
+    emitted = emit(lower(replace(scene.checked, render=settings, camera=renderer.camera)), target)
     source = counting_source(emitted, len(params), target.double)
     program = build(source, scene.device)
-    frame = run.Frame(width, height, settings.samples, 0, run.camera_block(camera))
+    frame = replace(renderer.frame, width=width, height=height)
     counters = run.counted_render(program, scene.device, frame, params, target.lanes, target.double,
-                                  COUNT_SLOTS, len(channels(settings.aovs)))
+                                  COUNT_SLOTS, len(renderer.channels))
     totals = counters.sum(axis=0)
     evaluations = {p: int(round(totals[BOOKKEEPING_SLOTS + i])) for i, p in enumerate(PURPOSES)}
     seconds = []
@@ -155,7 +154,6 @@ def count(scene, width: int | None = None, height: int | None = None, camera=Non
 
 def table(counts: Counts) -> str:
     """The counts as a report: per pixel by purpose, with the totals."""
-    from .bench import aligned
     c = counts
     per_pixel = c.per_pixel()
     rows = [("scene", c.scene), ("resolution", f"{c.width}x{c.height}"),

@@ -218,12 +218,22 @@ def driver_cache_dir() -> str:
     return os.environ.get("POCL_CACHE_DIR") or str(cache_dir() / "pocl")
 
 
+def building_markers() -> Path:
+    """The folder of the markers of the processes that use the driver's
+    kernel cache (see the module docstring), a file per process id."""
+    return cache_dir() / "building"
+
+
+def building_marker(pid: int) -> Path:
+    return building_markers() / str(pid)
+
+
 @lru_cache(maxsize=1)
 def _own_driver_cache() -> None:
     """Point PoCL at fractalc's kernel cache (before the driver loads) and
     clear it if a process died while using it."""
     os.environ["POCL_CACHE_DIR"] = driver_cache_dir()
-    markers = cache_dir() / "building"
+    markers = building_markers()
     found = list(markers.glob("*")) if markers.is_dir() else []
     dead = [marker for marker in found if not _alive(marker.name)]
     if not dead or len(dead) < len(found):
@@ -254,10 +264,9 @@ def _alive(pid: str) -> bool:
 def mark_building() -> None:
     """Leave a marker until this process exits normally (see the module
     docstring)."""
-    markers = cache_dir() / "building"
+    marker = building_marker(os.getpid())
     try:
-        markers.mkdir(parents=True, exist_ok=True)
-        marker = markers / str(os.getpid())
+        marker.parent.mkdir(parents=True, exist_ok=True)
         marker.write_text(driver_cache_dir())
     except OSError:
         return

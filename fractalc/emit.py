@@ -14,14 +14,15 @@ import dataclasses
 import re
 from dataclasses import dataclass
 
-from . import __version__, ir, pathtrace, ranges
-from .check import FLOAT_MAX
+from . import ir, pathtrace, ranges
 from .hoist import DERIVED_SLOTS, Hoisted, hoist
 from .lower import POINT, SceneIR
+from .types import FLOAT_MAX
 from .schedule import ForBlock, Hoist, IfBlock, schedule, varying
 from .passes import PASSES, channels
 from .program import Light
 from .stdlib import library
+from .version import __version__
 
 AMBIENT = 0.25          # ambient light, times the material's colour and AO
 AO_DELTA = 0.05         # spacing of the AO samples along the normal

@@ -1,7 +1,7 @@
 """The built-in fractals: the formulas of LANGUAGE.md, "Fractals", written
 in the language (stdlib_frac/builtins.frac: one source of truth, with the
-overflow handling that keeps every estimate finite), and their signatures
-as shapes (the `//:` syntax of stdlib.py).
+overflow handling that keeps every estimate finite); their signatures are
+the `//: fractal` lines of stdlib_cl/fractals/, beside their bound radii.
 
 Each builder takes the point (three IR values) and the fractal's arguments
 in its signature's order, and gives the distance estimate and, if asked,
@@ -39,22 +39,12 @@ def _formula(name: str, point: Vector, args: tuple, iterations: ir.Expr, bailout
     return Orbit(found.distance, found.trap, found.inside)
 
 
-MANDELBULB = "power: num = 8 1..32, iterations: int = 12 1..1000, bailout: num = 2 >0"
-
-
 def mandelbulb(p: Vector, power: ir.Expr, iterations: ir.Expr, bailout: ir.Expr, trap: bool = False) -> Orbit:
     return _formula("mandelbulb", p, (power,), iterations, bailout, trap)
 
 
-JULIA = "c: vec4 = (-0.2, 0.6, 0.2, 0), slice: num = 0, iterations: int = 12 1..1000, bailout: num = 4 >0"
-
-
 def julia(p: Vector, c: ir.Vec, slice_: ir.Expr, iterations: ir.Expr, bailout: ir.Expr, trap: bool = False) -> Orbit:
     return _formula("julia", p, (c, slice_), iterations, bailout, trap)
-
-
-MANDELBOX = ("scale: num = 2, min_radius: num = 0.5 >0 <=fixed_radius, fixed_radius: num = 1 >0, "
-             "fold_limit: num = 1 >0, iterations: int = 12 1..1000")
 
 
 def mandelbox(p: Vector, scale: ir.Expr, min_radius: ir.Expr, fixed_radius: ir.Expr, fold_limit: ir.Expr,
@@ -62,31 +52,21 @@ def mandelbox(p: Vector, scale: ir.Expr, min_radius: ir.Expr, fixed_radius: ir.E
     return _formula("mandelbox", p, (scale, min_radius, fixed_radius, fold_limit), iterations, None, trap)
 
 
-MENGER = "level: int = 4 0..10"
-
-
 def menger(p: Vector, level: ir.Expr, trap: bool = False) -> Orbit:
     return _formula("menger", p, (), level, None, trap)
-
-
-SIERPINSKI = "level: int = 6 0..10"
 
 
 def sierpinski(p: Vector, level: ir.Expr, trap: bool = False) -> Orbit:
     return _formula("sierpinski", p, (), level, None, trap)
 
 
-# name -> (signature text, builder)
-FRACTALS: dict[str, tuple[str, Callable[..., Orbit]]] = {
-    "mandelbulb": (MANDELBULB, mandelbulb),
-    "julia": (JULIA, julia),
-    "mandelbox": (MANDELBOX, mandelbox),
-    "menger": (MENGER, menger),
-    "sierpinski": (SIERPINSKI, sierpinski),
+# name -> builder
+FRACTALS: dict[str, Callable[..., Orbit]] = {
+    "mandelbulb": mandelbulb, "julia": julia, "mandelbox": mandelbox, "menger": menger, "sierpinski": sierpinski,
 }
 
 
 def orbit(name: str, point: Vector, args: tuple, trap: bool = False) -> Orbit:
     """The fractal `name` at `point`; its orbit trap too if `trap` (else
     the loop carries none)."""
-    return FRACTALS[name][1](point, *args, trap=trap)
+    return FRACTALS[name](point, *args, trap=trap)

@@ -32,7 +32,6 @@ class Type(str, enum.Enum):
 
 REAL, INT, MASK, VEC3 = Type.REAL, Type.INT, Type.MASK, Type.VEC3
 
-
 class _Interned(type):
     """Hash-consing: constructing a node equal to a live one returns that
     one. Equal nodes are then the same object, so comparing and hashing

@@ -27,6 +27,8 @@ from typing import Callable
 import numpy as np
 
 from .cache import cache_dir
+from .drivers import platform_devices, register
+from .emit import double_literals
 from .errors import RenderError
 from .resources import resource_dir
 
@@ -106,7 +108,6 @@ def probe_source(lanes: int, double: bool) -> str:
     text = "\n".join([f"#define LANES {lanes}", f"#define PRECISION_DOUBLE {int(double)}",
                       "#define FAST_MATH 0", (root / "prelude.cl").read_text(), (root / "probe.cl").read_text()])
     if double:
-        from .emit import double_literals
         text = double_literals(text)
     return text
 
@@ -115,7 +116,6 @@ def probe_source(lanes: int, double: bool) -> str:
 
 def _probe_in_this_process(device_index: int, lanes: int, double: bool) -> dict:
     """The verdict: `error` (None if the probe passed) and `native_error`."""
-    from .drivers import platform_devices, register
     register()      # before the loader starts; the driver cache is the child's own (run_probe)
     import pyopencl as cl
     device = platform_devices(cl)[device_index]

@@ -24,7 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .api import Scene
 from .arguments import checked
+from .lower import lower
 from .memory import require_memory
 
 # memory per sample along the rays: the estimates (float64), whether each
@@ -77,7 +79,6 @@ def has_escape_time_set(scene) -> bool:
     """Whether a fractal of the scene has a bailout, so an escape-time set
     other than its estimate's surface (the lowered IR is interned: the
     same scene is the same expression)."""
-    from .lower import lower
     return lower(scene.checked, escape_time_sets=True).distance is not lower(scene.checked).distance
 
 
@@ -94,7 +95,6 @@ def measure(scene, rays: int = 400, steps: int = 1500, seed: int = 0, surface: f
     rays, seed, surface = checked("rays", rays), checked("seed", seed), checked("surface", surface)
     require_memory(rays * steps * SAMPLE_BYTES, f"measuring along {rays} rays of {steps} steps")
     if scene.device.info.double and scene.precision != "double":
-        from .api import Scene
         scene = Scene(scene.checked, scene.params, precision="double", device=scene.device_spec, lanes=scene.lanes)
     centre, radius = _bound(scene)
     level = surface * radius

@@ -20,6 +20,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from .arguments import checked
 from .program import Camera, CameraPath
 
 CAMERA_CHANNELS = ("position", "target", "up", "fov", "aperture", "focus")
@@ -99,7 +100,6 @@ def frame_times(path: CameraPath, fps: float) -> np.ndarray:
     """One time per frame at `fps`, from the first keyframe to the last,
     both included when the duration is a whole number of frames;
     ValueError for more than MAX_FRAMES frames."""
-    from .arguments import checked
     fps = checked("fps", fps)
     frames = (path.end - path.start) * fps
     if frames >= MAX_FRAMES:

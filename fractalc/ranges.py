@@ -20,7 +20,7 @@ import math
 from dataclasses import dataclass
 
 from . import ir
-from .check import FLOAT_MAX
+from .types import FLOAT_MAX
 
 ROUNDING = 1e-5        # relative widening of each computed bound: float's rounding and the library's ulps
 TINY = 1e-37           # and absolute, around 0

@@ -1,4 +1,4 @@
-"""Stage 6: run a built program (`render`, `distances`).
+"""Stage 6: run a built program (`RenderKernel`, `distances`).
 
 The image is rendered in tiles, each launched while the ones before it still
 run (the device never waits for the host): no single launch covers a large
@@ -13,6 +13,7 @@ import sys
 import threading
 from collections import OrderedDict, deque
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Callable
 
 import numpy as np
@@ -42,6 +43,7 @@ class Frame:
     camera: tuple[float, ...]
 
 
+@lru_cache(maxsize=64)    # a frame's camera: its metadata asks again for the matrices
 def camera_block(camera: Camera) -> tuple[float, ...]:
     """position, forward, right, up', tan(fov/2), aperture, focus distance
     (LANGUAGE.md's camera model), then the projection, the fisheye's half
@@ -146,48 +148,143 @@ def _guard(action: str):
     return _Guard()
 
 
-def render(program, device: Device, frame: Frame, params, lanes: int, double: bool,
-           progress: Callable[[int], None] | None = None, channels: tuple[str, ...] = CHANNELS) -> np.ndarray:
-    """Render `frame`: an (H, W, len(channels)) float32 array, a pixel's
-    `channels` (those the program was emitted with) in order."""
-    import pyopencl as cl
-    width, height = frame.width, frame.height
-    kernel = cl.Kernel(program, "render")
-    block_width, block_height = lane_block(lanes)
-    group = device.work_group
-    step_x, step_y = (block_width * group[0], block_height * group[1]) if group else (block_width, block_height)
-    pitch, rows = _round_up(width, step_x), _round_up(height, step_y)
-    tile_width, tile_height = _round_up(min(TILE_WIDTH, pitch), step_x), _round_up(min(TILE_HEIGHT, rows), step_y)
-    image = np.empty((rows, pitch, len(channels)), dtype=np.float32)
-    with _guard("rendering"):
-        params_buffer = kernel_params(program, device, params, double)
-        camera_buffer = _constant_buffer(device, frame.camera, double)
-        # the kernel writes into `image` itself where the device can (CPUs):
-        # no copy; mapping it at the end makes its contents current anywhere
-        out = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=image)
-        queued = deque()    # (launch event, pixels) of the tiles in flight
-        try:
-            for y0 in range(0, rows, tile_height):
-                for x0 in range(0, pitch, tile_width):
-                    columns, lines = min(tile_width, pitch - x0), min(tile_height, rows - y0)
-                    event = kernel(device.queue, (columns // block_width, lines // block_height), group,
-                                   out, params_buffer, camera_buffer, np.int32(width), np.int32(height),
-                                   np.int32(x0), np.int32(y0), np.int32(pitch),
-                                   np.int32(frame.samples), np.uint32(frame.seed))
-                    queued.append((event, max(0, min(columns, width - x0)) * max(0, min(lines, height - y0))))
-                    # a few tiles ahead keep the device busy while we
-                    # report progress; an interrupt waits for those few
-                    while len(queued) > TILES_IN_FLIGHT:
-                        _finish(queued.popleft(), progress)
-            while queued:
-                _finish(queued.popleft(), progress)
-        except BaseException:
-            device.queue.finish()    # no kernel may write into `image` once it is gone
-            raise
-        mapped, _ = cl.enqueue_map_buffer(device.queue, out, cl.map_flags.READ, 0, image.shape,
-                                          image.dtype, is_blocking=True)
-        mapped.base.release(device.queue)
-    return _without_padding(image, height, width)
+def render_arguments(out, params, camera, frame: Frame, x0: int, y0: int, pitch: int) -> tuple:
+    """The render kernel's arguments after its global size, in the order
+    of its parameters (stdlib_cl/raymarch.cl): the output, the params' and
+    camera's buffers, then the frame and the launch's place in it."""
+    return (out, params, camera, np.int32(frame.width), np.int32(frame.height), np.int32(x0), np.int32(y0),
+            np.int32(pitch), np.int32(frame.samples), np.uint32(frame.seed))
+
+
+@dataclass(frozen=True)
+class Grid:
+    """How a device's launches cover an image: a work-item renders a lane
+    block, a work-group `group` of blocks (None: the driver's choice), so
+    launches start and end on multiples of `step` pixels."""
+    block: tuple[int, int]
+    group: tuple[int, int] | None
+    step: tuple[int, int]
+
+    @staticmethod
+    def of(device: Device, lanes: int) -> Grid:
+        block, group = lane_block(lanes), device.work_group
+        return Grid(block, group, (block[0] * group[0], block[1] * group[1]) if group else block)
+
+    def padded(self, width: int, height: int) -> tuple[int, int]:
+        """The image's pitch and rows: its size rounded up to whole steps."""
+        return _round_up(width, self.step[0]), _round_up(height, self.step[1])
+
+    def items(self, columns: int, lines: int) -> tuple[int, int]:
+        """The global size of a launch over `columns` x `lines` pixels."""
+        return columns // self.block[0], lines // self.block[1]
+
+
+class _Uniforms:
+    """A read-only buffer of a kernel's values, kept from launch to launch
+    and written again only when they change."""
+
+    def __init__(self, device: Device, double: bool):
+        self.device, self.scalar = device, _scalar(double)
+        self.values, self.buffer = None, None
+
+    def buffer_of(self, values) -> object:
+        import pyopencl as cl
+        values = tuple(values) or (0.0,)
+        if values != self.values:
+            data = np.array(values, dtype=self.scalar)
+            if self.buffer is not None and self.buffer.size == data.nbytes:
+                cl.enqueue_copy(self.device.queue, self.buffer, data, is_blocking=True)
+            else:
+                self.buffer = cl.Buffer(self.device.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                                        hostbuf=data)
+            self.values = values
+        return self.buffer
+
+
+class RenderKernel:
+    """A built program's `render` kernel on its device, taken from the
+    program once, with the buffers of its params (`kernel_params`) and
+    camera block, which frames reuse (each written only when its values
+    change). It renders one frame at a time: a scene's frames, one after
+    the other."""
+
+    def __init__(self, program, device: Device, lanes: int, double: bool):
+        import pyopencl as cl
+        self.program, self.device, self.lanes, self.double = program, device, lanes, double
+        self.kernel = cl.Kernel(program, "render")
+        self.grid = Grid.of(device, lanes)
+        self._camera = _Uniforms(device, double)
+
+    def _uniforms(self, frame: Frame, params) -> tuple:
+        """The params' and camera's buffers, holding the values of this frame."""
+        return kernel_params(self.program, self.device, params, self.double), self._camera.buffer_of(frame.camera)
+
+    def _launch(self, global_size, out, uniforms: tuple, frame: Frame, x0: int, y0: int, pitch: int):
+        return self.kernel(self.device.queue, global_size, self.grid.group,
+                           *render_arguments(out, *uniforms, frame, x0, y0, pitch))
+
+    def render(self, frame: Frame, params, progress: Callable[[int], None] | None = None,
+               channels: tuple[str, ...] = CHANNELS) -> np.ndarray:
+        """Render `frame`: an (H, W, len(channels)) float32 array, a pixel's
+        `channels` (those the program was emitted with) in order."""
+        import pyopencl as cl
+        width, height = frame.width, frame.height
+        grid = self.grid
+        pitch, rows = grid.padded(width, height)
+        tile_width, tile_height = grid.padded(min(TILE_WIDTH, pitch), min(TILE_HEIGHT, rows))
+        # a new array per frame: the image returned is this array, which the caller keeps
+        image = np.empty((rows, pitch, len(channels)), dtype=np.float32)
+        with _guard("rendering"):
+            # the kernel writes into `image` itself where the device can (CPUs):
+            # no copy; mapping it at the end makes its contents current anywhere
+            out = cl.Buffer(self.device.context, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=image)
+            uniforms = self._uniforms(frame, params)
+            queued = deque()    # (launch event, pixels) of the tiles in flight
+            try:
+                for y0 in range(0, rows, tile_height):
+                    for x0 in range(0, pitch, tile_width):
+                        columns, lines = min(tile_width, pitch - x0), min(tile_height, rows - y0)
+                        event = self._launch(grid.items(columns, lines), out, uniforms, frame, x0, y0, pitch)
+                        queued.append((event, max(0, min(columns, width - x0)) * max(0, min(lines, height - y0))))
+                        # a few tiles ahead keep the device busy while we
+                        # report progress; an interrupt waits for those few
+                        while len(queued) > TILES_IN_FLIGHT:
+                            _finish(queued.popleft(), progress)
+                while queued:
+                    _finish(queued.popleft(), progress)
+            except BaseException:
+                self.device.queue.finish()    # no kernel may write into `image` once it is gone
+                raise
+            mapped, _ = cl.enqueue_map_buffer(self.device.queue, out, cl.map_flags.READ, 0, image.shape,
+                                              image.dtype, is_blocking=True)
+            mapped.base.release(self.device.queue)
+        return _without_padding(image, height, width)
+
+    def rows(self, frame: Frame, params, first: int, count: int,
+             channels: tuple[str, ...] = CHANNELS) -> np.ndarray:
+        """Rows `first` to `first + count - 1` of `frame` (a render farm's
+        tile, fractalc/cluster.py): a (count, W, len(channels)) float32
+        array, equal bit for bit to those rows of `render`'s image, since a
+        pixel's rays and seed depend on its place in the whole frame, not on
+        the launch. The kernel addresses the whole image, so the device
+        buffer spans the rows above the tile too; only the tile's rows are
+        written and read back (on CPUs the others are never touched, so they
+        take no memory)."""
+        import pyopencl as cl
+        grid = self.grid
+        pitch, _ = grid.padded(frame.width, frame.height)
+        top, bottom = first // grid.step[1] * grid.step[1], _round_up(first + count, grid.step[1])   # whole blocks
+        launch_width, _ = grid.padded(min(TILE_WIDTH, pitch), 0)
+        tile = np.empty((bottom - top, pitch, len(channels)), dtype=np.float32)
+        with _guard("rendering"):
+            out = cl.Buffer(self.device.context, cl.mem_flags.WRITE_ONLY, bottom * pitch * len(channels) * 4)
+            uniforms = self._uniforms(frame, params)
+            for x0 in range(0, pitch, launch_width):
+                self._launch(grid.items(min(launch_width, pitch - x0), bottom - top), out, uniforms, frame, x0, top,
+                             pitch)
+            cl.enqueue_copy(self.device.queue, tile, out, src_offset=top * pitch * len(channels) * 4,
+                            is_blocking=True)
+        return np.ascontiguousarray(tile[first - top:first - top + count, :frame.width])
 
 
 def counted_render(program, device: Device, frame: Frame, params, lanes: int, double: bool,
@@ -198,52 +295,19 @@ def counted_render(program, device: Device, frame: Frame, params, lanes: int, do
     work-item, each slot summed over its rays."""
     import pyopencl as cl
     kernel = cl.Kernel(program, "render")
-    block_width, block_height = lane_block(lanes)
-    group = device.work_group
-    step_x, step_y = (block_width * group[0], block_height * group[1]) if group else (block_width, block_height)
-    pitch, rows = _round_up(frame.width, step_x), _round_up(frame.height, step_y)
-    items = (pitch // block_width) * (rows // block_height)
+    grid = Grid.of(device, lanes)
+    pitch, rows = grid.padded(frame.width, frame.height)
+    columns, lines = grid.items(pitch, rows)
     base = len(params) + DERIVED_SLOTS
-    state = np.zeros(base + items * slots * lanes, dtype=_scalar(double))
+    state = np.zeros(base + columns * lines * slots * lanes, dtype=_scalar(double))
     with _guard("counting distance evaluations"):
         flags = cl.mem_flags
-        state_buffer = kernel_params(program, device, params, double, items * slots * lanes)
+        state_buffer = kernel_params(program, device, params, double, columns * lines * slots * lanes)
         out = cl.Buffer(device.context, flags.WRITE_ONLY, rows * pitch * channels * 4)
-        kernel(device.queue, (pitch // block_width, rows // block_height), group, out, state_buffer,
-               _constant_buffer(device, frame.camera, double), np.int32(frame.width), np.int32(frame.height),
-               np.int32(0), np.int32(0), np.int32(pitch), np.int32(frame.samples), np.uint32(frame.seed))
+        kernel(device.queue, (columns, lines), grid.group,
+               *render_arguments(out, state_buffer, _constant_buffer(device, frame.camera, double), frame, 0, 0, pitch))
         cl.enqueue_copy(device.queue, state, state_buffer, is_blocking=True)
-    return state[base:].reshape(items, slots, lanes).sum(axis=2)
-
-
-def render_rows(program, device: Device, frame: Frame, params, lanes: int, double: bool,
-                first: int, count: int, channels: tuple[str, ...] = CHANNELS) -> np.ndarray:
-    """Rows `first` to `first + count - 1` of `frame` (a render farm's tile,
-    fractalc/cluster.py): a (count, W, len(channels)) float32 array, equal
-    bit for bit to those rows of `render`'s image, since a pixel's rays and
-    seed depend on its place in the whole frame, not on the launch. The
-    kernel addresses the whole image, so the device buffer spans the rows
-    above the tile too; only the tile's rows are written and read back
-    (on CPUs the others are never touched, so they take no memory)."""
-    import pyopencl as cl
-    kernel = cl.Kernel(program, "render")
-    block_width, block_height = lane_block(lanes)
-    group = device.work_group
-    step_x, step_y = (block_width * group[0], block_height * group[1]) if group else (block_width, block_height)
-    pitch = _round_up(frame.width, step_x)
-    top, bottom = first // step_y * step_y, _round_up(first + count, step_y)   # whole blocks
-    launch_width = _round_up(min(TILE_WIDTH, pitch), step_x)
-    tile = np.empty((bottom - top, pitch, len(channels)), dtype=np.float32)
-    with _guard("rendering"):
-        params_buffer = kernel_params(program, device, params, double)
-        camera_buffer = _constant_buffer(device, frame.camera, double)
-        out = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY, bottom * pitch * len(channels) * 4)
-        for x0 in range(0, pitch, launch_width):
-            kernel(device.queue, (min(launch_width, pitch - x0) // block_width, (bottom - top) // block_height),
-                   group, out, params_buffer, camera_buffer, np.int32(frame.width), np.int32(frame.height),
-                   np.int32(x0), np.int32(top), np.int32(pitch), np.int32(frame.samples), np.uint32(frame.seed))
-        cl.enqueue_copy(device.queue, tile, out, src_offset=top * pitch * len(channels) * 4, is_blocking=True)
-    return np.ascontiguousarray(tile[first - top:first - top + count, :frame.width])
+    return state[base:].reshape(columns * lines, slots, lanes).sum(axis=2)
 
 
 def _without_padding(image: np.ndarray, height: int, width: int) -> np.ndarray:

@@ -6,6 +6,10 @@ under NAME; that line is the one source of its signature:
 
     //: shape box(size: size = 1 >0)
 
+A `//:` line standing alone (a blank line after it) signs a form whose code
+is not the library's: a fractal, whose estimate fractals.py builds as IR
+(its file holds the bound radius), carries no function.
+
 ARG is `name: type [= default] [constraint ...]`, with types `num`, `int`,
 `vec3`, `vec4` and `size` (a number or a vec3; a number means all three),
 and constraints `>X`, `>=X`, `<=X`, `<X`, `A..B` (inclusive), `nonzero`, or
@@ -92,6 +96,19 @@ def _parameter_types(source: str) -> tuple[str, ...]:
     return tuple(" ".join(p.split()[:-1]).replace("__constant ", "") for p in inside.split(",") if p.strip())
 
 
+def _signatures(lines: list[str], function: str) -> dict[str, Signature]:
+    """The signatures of the `//:` lines among `lines`, implemented by
+    the library's `function` ("" for none)."""
+    signatures = {}
+    for line in lines:
+        annotation = _ANNOTATION.match(line)
+        if annotation:
+            kind, name, args = annotation.groups()
+            signatures[name] = Signature(kind, name, tuple(_parse_parameter(a) for a in _split_top_level(args)),
+                                         function)
+    return signatures
+
+
 def _parse_file(path, file_name: str) -> tuple[list[Function], dict[str, Signature]]:
     lines = path.read_text().splitlines()
     header: list[str] = []
@@ -107,6 +124,7 @@ def _parse_file(path, file_name: str) -> tuple[list[Function], dict[str, Signatu
     for line in lines[i:]:
         if name is None:
             if not line.strip():
+                signatures.update(_signatures(pending, ""))
                 pending = []
                 continue
             if line.startswith("//"):
@@ -128,12 +146,7 @@ def _parse_file(path, file_name: str) -> tuple[list[Function], dict[str, Signatu
         depth += line.count("{") - line.count("}")
         if depth == 0 and "}" in line:
             source = "\n".join(body)
-            for comment in body:
-                annotation = _ANNOTATION.match(comment)
-                if annotation:
-                    kind, lang_name, args = annotation.groups()
-                    params = tuple(_parse_parameter(a) for a in _split_top_level(args))
-                    signatures[lang_name] = Signature(kind, lang_name, params, name)
+            signatures.update(_signatures(body, name))
             functions.append(Function(name, source, "\n".join(header), file_name, (),
                                       _parameter_types(source)))
             name = None
@@ -176,9 +189,6 @@ def library() -> Library:
         found, sigs = _parse_file(path, file_name)
         functions.update((f.name, f) for f in found)
         signatures.update(sigs)
-    from .fractals import FRACTALS    # the fractals are IR, their signatures beside them
-    for name, (parameters, _) in FRACTALS.items():
-        signatures[name] = Signature("fractal", name, tuple(_parse_parameter(a) for a in _split_top_level(parameters)))
     names = set(functions)
     with_calls = {}
     for f in functions.values():

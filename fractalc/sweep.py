@@ -27,9 +27,12 @@ from typing import Callable
 import numpy as np
 
 from .api import Image, Scene
+from .arguments import parse_number
 from .bench import aligned, machine, machine_rows
+from .check import check_value
 from .emit import Target, fast_math
 from .errors import RenderError
+from .program import RENDER_KEYS
 from .write import linear_to_srgb, publish
 
 # The values each knob takes in the sweep (the scene's own value is the
@@ -103,9 +106,6 @@ def one_knob_changes(settings: dict) -> list[dict]:
 def parse_changes(items: list[str]) -> list[dict]:
     """`KNOB=V1,V2` items (from --vary) as one-knob changes; ValueError
     saying what is wrong."""
-    from .arguments import parse_number
-    from .check import check_value
-    from .program import RENDER_KEYS
     changes = []
     for item in items:
         knob, sep, values = item.partition("=")

@@ -31,6 +31,7 @@ except ImportError:
     raise RenderError("fractalc view needs pygame: pip install 'fractalc[view]'") from None
 
 from .api import Image, Scene, load                      # noqa: E402  (after the pygame check)
+from .bench import orbit_camera                          # noqa: E402
 from .paths import camera_at, params_at                  # noqa: E402
 from .program import Camera                              # noqa: E402
 from .write import linear_to_srgb, tone_mapped           # noqa: E402
@@ -602,7 +603,6 @@ def measure(viewer: Viewer, frames: int) -> float:
     """Frames per second of the window's loop while the camera moves: the
     camera orbits its target as in `fractalc bench`; each frame is a step
     (a preview render) and a redraw. Works with SDL_VIDEODRIVER=dummy."""
-    from .bench import orbit_camera
     screen, font = _open_window(viewer)
     start_camera = viewer.camera
     try:

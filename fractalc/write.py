@@ -30,6 +30,8 @@ from .passes import DEFAULT_CHANNELS
 EXR_CHANNELS = DEFAULT_CHANNELS
 TEMPORARY_PREFIX = ".fractalc-"
 STRIP_ROWS = 64
+# the image files `render -o` and the studio write (OpenImageIO, by the extension)
+IMAGE_EXTENSIONS = (".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff")
 COMPRESSIONS = ("zip", "zips", "piz", "pxr24", "b44", "b44a", "dwaa", "dwab", "rle", "none")
 PNG_BITS = (8, 16)
 # metadata holding a 4x4 matrix (16 numbers, row-major): OpenEXR standard

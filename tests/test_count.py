@@ -177,7 +177,7 @@ def test_every_evaluation_in_the_counting_build_is_counted():
     from dataclasses import replace
     from fractalc.emit import emit
     from fractalc.lower import lower
-    target = replace(scene._target(scene.checked.render), count=True)
+    target = replace(scene.renderer().target, count=True)
     source = counting_source(emit(lower(scene.checked), target), 0, False)
     code = "\n".join(line for line in source.splitlines() if not line.lstrip().startswith("//"))
     functions = re.split(r"\n(?=\S)", code)

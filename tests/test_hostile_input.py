@@ -269,7 +269,7 @@ def test_out_of_memory_is_one_line_with_exit_1(tmp_path, capsys, monkeypatch):
     def no_memory(*args, **kwargs):
         raise MemoryError("Unable to allocate 144. GiB for an array")
 
-    monkeypatch.setattr(run, "render", no_memory)
+    monkeypatch.setattr(run.RenderKernel, "render", no_memory)
     scene = tmp_path / "scene.frac"
     scene.write_text("scene sphere(1)\n")
     assert cli.main(["render", str(scene), "-o", str(tmp_path / "out.exr"), "-q",

@@ -487,12 +487,10 @@ def test_a_rectangle_light_gives_a_plane_the_irradiance_of_lamberts_polygon_form
 
 @pytest.mark.opencl
 def test_a_render_farm_tile_of_a_path_traced_image_is_those_rows_of_the_local_render():
-    from fractalc.cluster import _render_tile
     scene = fractalc.loads(SCENE)
     local = scene.render(samples=40, seed=5)
-    keys = {"samples": 40}
-    top, _ = _render_tile(scene, keys, 5, None, 0, 5)
-    bottom, _ = _render_tile(scene, keys, 5, None, 5, 7)
+    renderer = scene.renderer(5, samples=40)     # as the farm's tiles render (fractalc/cluster.py)
+    top, bottom = renderer.rows(0, 5), renderer.rows(5, 7)
     assert np.array_equal(np.concatenate([top, bottom])[..., :4], local.rgba)
 
 

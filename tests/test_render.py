@@ -364,7 +364,7 @@ def test_lanes_agree_with_eight(lanes):
     planes = {}
     for n in (8, lanes):
         program, device = _built(scene, n)
-        pixels = run_module.render(program, device, frame, params, n, False)
+        pixels = run_module.RenderKernel(program, device, n, False).render(frame, params)
         assert pixels.shape == (height, width, len(run_module.CHANNELS))
         planes[n] = dict(zip(run_module.CHANNELS, np.moveaxis(pixels, -1, 0)))
     a, b = planes[8], planes[lanes]
@@ -451,6 +451,44 @@ def test_same_text_and_runtime_settings_do_not_rebuild():
     assert build_module.statistics.builds == builds
     assert large.depth.shape == (H + 10, 2 * W) and small.depth.shape == (H, W)
     assert not np.array_equal(aa.rgba, small.rgba)
+
+
+@pytest.mark.opencl
+def test_frames_share_one_kernel_and_each_renders_its_own_params_and_camera():
+    """Frames reuse the scene's render kernel (taken from the program once,
+    its params' and camera's buffers kept between frames, written again
+    only when their values change), yet each renders its own params and
+    camera: as a scene that renders nothing else does."""
+    text = _unique_scene()
+    scene = fractalc.loads(text)
+    kernel = scene.renderer(width=W, height=H).kernel
+    side = fractalc.Camera(position=(2, -3, 1.5), target=(0, 0, 0), fov=40)
+    first = scene.render(width=W, height=H)
+    scene.set_params({"r": 1.3})
+    moved = scene.render(width=W, height=H, camera=side)
+    scene.set_params({"r": 1})
+    again = scene.render(width=W, height=H)
+    assert scene.renderer(width=2 * W, height=H, camera=side, samples=2).kernel is kernel
+    np.testing.assert_array_equal(again.rgba, first.rgba)
+    alone = fractalc.loads(text, params={"r": 1.3}).render(width=W, height=H, camera=side)
+    np.testing.assert_array_equal(moved.rgba, alone.rgba)
+    assert not np.array_equal(moved.depth, first.depth)
+
+
+@pytest.mark.opencl
+@pytest.mark.parametrize("integrator, samples", [("direct", 2), ("path", 20)])
+def test_a_block_of_rows_equals_those_rows_of_the_whole_frame(integrator, samples):
+    """The rendering seam (Scene.renderer) that the render farm's tiles
+    use: any block of rows, not on lane-block edges, is bit for bit those
+    rows of the whole frame; the path tracer's passes (16 samples, then 4)
+    too."""
+    renderer = fractalc.loads(LANES_SCENE).renderer(seed=3, width=W, height=H, samples=samples,
+                                                    integrator=integrator, aovs=["P"])
+    whole = renderer.pixels()
+    for first, count in ((0, H), (5, 7), (H - 3, 3)):
+        np.testing.assert_array_equal(renderer.rows(first, count), whole[first:first + count])
+    image = renderer.image(whole, 0.25)
+    assert image.metadata["render_seconds"] == "0.250000" and image.passes["P"].shape == (H, W, 3)
 
 
 @pytest.mark.opencl

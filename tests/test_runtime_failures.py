@@ -60,7 +60,7 @@ def test_ctrl_c_stops_cleanly_without_output(tmp_path, monkeypatch, capsys):
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(run, "render", interrupted)
+    monkeypatch.setattr(run.RenderKernel, "render", interrupted)
     status = cli.main(["render", str(tmp_path / "scene.frac"), "-o", str(out), "-q"])
     err = capsys.readouterr().err
     assert status == 130 and "interrupted" in err and "Traceback" not in err
@@ -79,7 +79,7 @@ def test_an_interrupted_render_waits_for_the_tiles_it_queued():
     import pyopencl as cl
 
     scene = fractalc.loads(SCENE)
-    program, target = scene._program(scene.checked.render)
+    renderer = scene.renderer()
     device = scene.device
 
     class RecordingQueue(cl.CommandQueue):
@@ -97,7 +97,8 @@ def test_an_interrupted_render_waits_for_the_tiles_it_queued():
         raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        run.render(program, watched, frame, [], target.lanes, target.double, interrupt)
+        run.RenderKernel(renderer.kernel.program, watched, renderer.target.lanes, renderer.target.double).render(
+            frame, [], interrupt)
     assert RecordingQueue.finished == 1
 
 
@@ -289,7 +290,7 @@ def test_memory_estimates_refuse_before_any_work(monkeypatch, capsys, tmp_path):
     from fractalc import mesh as meshing
     monkeypatch.setattr(memory, "available", lambda: 64 * 2 ** 20)
     started = []
-    monkeypatch.setattr(run, "render", lambda *a, **k: started.append("render"))
+    monkeypatch.setattr(run.RenderKernel, "render", lambda *a, **k: started.append("render"))
     scene = fractalc.loads(SCENE)
     with pytest.raises(fractalc.RenderError, match=r"out of memory: an image of width 4096 and height 4096 \(9 "):
         scene.render(width=4096, height=4096)

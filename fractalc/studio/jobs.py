@@ -18,10 +18,9 @@ from typing import Callable
 
 from ..animate import plan_frames, render_frame, save_frame
 from ..api import Camera, Scene
-from ..cli import IMAGE_EXTENSIONS
 from ..errors import RenderError, SceneError
 from ..program import CheckedScene
-from ..write import output_problem
+from ..write import IMAGE_EXTENSIONS, output_problem
 from .edits import number_text
 
 FRAME_EXTENSIONS = (".exr", ".png")

@@ -2,6 +2,8 @@
 // the IR loop `julia` in fractalc/fractals.py): Hart, Sandin and Kauffman
 // 1989; Syntopia, "Distance Estimated 3D Fractals", part IV.
 
+//: fractal julia(c: vec4 = (-0.2, 0.6, 0.2, 0), slice: num = 0, iterations: int = 12 1..1000, bailout: num = 4 >0)
+
 // A sphere holding every point where the DE can be <= 0. With
 // R = (1 + sqrt(1 + 4|c|)) / 2, the root of R^2 - R = |c| (so R >= 1): if
 // |q| > R then |q^2 + c| >= |q|^2 - |c| > |q|, so |q| grows, never reaches

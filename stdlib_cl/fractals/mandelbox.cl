@@ -2,6 +2,8 @@
 // the IR loop `mandelbox` in fractalc/fractals.py): Syntopia, "Distance
 // Estimated 3D Fractals", part VI.
 
+//: fractal mandelbox(scale: num = 2, min_radius: num = 0.5 >0 <=fixed_radius, fixed_radius: num = 1 >0, fold_limit: num = 1 >0, iterations: int = 12 1..1000)
+
 // A sphere holding the set (the points whose orbits do not escape), with
 // z != 0 outside, so the DE is > 0 there. Let L = fold_limit, s = scale and
 // P = |p_i| the largest coordinate of p, p_i > 0 say, and x_n the i-th

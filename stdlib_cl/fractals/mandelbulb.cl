@@ -2,6 +2,8 @@
 // loop `mandelbulb` in fractalc/fractals.py): Syntopia, "Distance
 // Estimated 3D Fractals", parts IV and V.
 
+//: fractal mandelbulb(power: num = 8 1..32, iterations: int = 12 1..1000, bailout: num = 2 >0)
+
 // A sphere holding every point where the DE can be <= 0, i.e. where the
 // final |z| can be <= 1. Let R = |p| with R^(power-1) >= 2 (so R > 1). If
 // |z| >= R then |z^power + p| >= |z|^power - R >= 2|z| - R >= |z|: |z| never
