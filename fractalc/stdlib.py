@@ -17,6 +17,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from functools import lru_cache
+from string import Template
 
 from .resources import resource_dir
 
@@ -190,6 +191,28 @@ def library() -> Library:
                                       f.parameter_types)
     return Library(with_calls, signatures, (root / PRELUDE).read_text(), (root / TEMPLATE).read_text(),
                    (root / DISTANCE_KERNEL).read_text())
+
+
+_TEMPLATE_START = "//@ "
+
+
+@lru_cache(maxsize=None)
+def templates(file_name: str) -> dict[str, Template]:
+    """The templates of the OpenCL C the emitter writes per scene, from the
+    file `stdlib_cl/FILE_NAME`: a line `//@ NAME [what it is]` opens the
+    template NAME, which runs to the next such line (its trailing blank
+    lines dropped); `$name` in it marks a value the emitter writes there."""
+    found: dict[str, list[str]] = {}
+    lines = None
+    for line in (resource_dir("stdlib_cl") / file_name).read_text().splitlines():
+        if line.startswith(_TEMPLATE_START):
+            name = line[len(_TEMPLATE_START):].split()[0]
+            if name in found:
+                raise ValueError(f"{file_name}: a second template {name}")
+            lines = found[name] = []
+        elif lines is not None:
+            lines.append(line)
+    return {name: Template("\n".join(lines).rstrip("\n")) for name, lines in found.items()}
 
 
 # ---- language forms that are not library functions -------------------------
