@@ -726,7 +726,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         resolve_features(_library_text(shading_functions), on),
         _normal_functions(scene.render.normals),
         shade,
-        resolve_features(lib.template, on),
+        resolve_features(lib.engine, on),
         lib.distance_kernel,
         resolve_features(pathtrace.source(scene, literal, on["TRANSPARENCY"]), on) if on["PATH_TRACE"] else "",
     ]

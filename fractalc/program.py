@@ -139,7 +139,7 @@ DEFAULT_MATERIAL = "(default)"
 
 
 # A camera's projections and stereo layouts, in the order of their codes in
-# the kernel's camera block (stdlib_cl/raymarch.cl, CAMERA_PROJECTION).
+# the kernel's camera block (stdlib_cl/engine/interface.cl, CAMERA_PROJECTION).
 PROJECTIONS = ("pinhole", "fisheye", "equirectangular")
 STEREO_LAYOUTS = ("none", "side_by_side", "top_bottom")
 

@@ -22,8 +22,28 @@ from string import Template
 from .resources import resource_dir
 
 PRELUDE = "prelude.cl"
-TEMPLATE = "raymarch.cl"
 DISTANCE_KERNEL = "distance.cl"
+# The engine: the fixed part of every render kernel, one file per concern
+# in stdlib_cl/engine/, in the order the kernel holds them (each after what
+# it uses); its `#if FEATURE_` blocks hold the optional effects.
+ENGINE_DIR = "engine"
+ENGINE = (
+    "interface",     # what the generated code defines; the camera argument's layout
+    "hits",          # Hart's hit threshold; a march's result
+    "cone",          # cone marching of a work-item's packet of rays
+    "march",         # sphere tracing, over-relaxed, within the scene's bound
+    "camera",        # camera rays: projections, stereo, depth of field
+    "sky",           # the environment (a sky gradient or map) and the background
+    "random",        # per-lane hashes for jitter
+    "channels",      # storing a block's pixels into the output's channels
+    "normal",        # the normal where a march hit
+    "fog",
+    "reflections",
+    "refraction",    # transparency
+    "glow",
+    "trace",         # the colour seen along a ray, effects included
+    "render",        # the `render` kernel: samples, then the channels and passes
+)
 
 
 @dataclass(frozen=True)
@@ -148,7 +168,7 @@ class Library:
     functions: dict[str, Function]
     signatures: dict[str, Signature]
     prelude: str
-    template: str
+    engine: str             # the files of ENGINE, in order
     distance_kernel: str    # `distance_at_points`, for render programs and distance programs alike
 
     def closure(self, roots) -> list[Function]:
@@ -175,6 +195,8 @@ def library() -> Library:
     functions: dict[str, Function] = {}
     signatures: dict[str, Signature] = {}
     for path in sorted(root.glob("*/*.cl")):
+        if path.parent.name == ENGINE_DIR:
+            continue
         file_name = str(path.relative_to(root))
         found, sigs = _parse_file(path, file_name)
         functions.update((f.name, f) for f in found)
@@ -189,8 +211,8 @@ def library() -> Library:
         called = {m for m in _IDENTIFIER.findall(body) if m in names and m != f.name}
         with_calls[f.name] = Function(f.name, f.source, f.header, f.file, tuple(sorted(called)),
                                       f.parameter_types)
-    return Library(with_calls, signatures, (root / PRELUDE).read_text(), (root / TEMPLATE).read_text(),
-                   (root / DISTANCE_KERNEL).read_text())
+    engine = "\n\n".join((root / ENGINE_DIR / f"{name}.cl").read_text().rstrip("\n") for name in ENGINE)
+    return Library(with_calls, signatures, (root / PRELUDE).read_text(), engine, (root / DISTANCE_KERNEL).read_text())
 
 
 _TEMPLATE_START = "//@ "
