@@ -36,7 +36,7 @@ class Target:
     lanes: int = 8          # rays per work-item: 1 (GPU) or 8/16 (CPU vector lanes)
     double: bool = False    # `real` is double
     exact_native: bool = False  # the device's native_ functions are exact (lanes.LaneChoice.native_exact)
-    count: bool = False     # the counting build's `#if FEATURE_COUNT` lines (fractalc/count.py)
+    count: bool = False     # the counting build's hooks kept (stdlib_cl/count.cl, fractalc/count.py)
 
 
 def literal(value: float) -> str:
@@ -520,11 +520,14 @@ def _effect_constants(render, on: dict[str, bool]) -> list[str]:
 
 
 _FEATURE_IF = re.compile(r"^#if FEATURE_(\w+)\s*$")
+# a hook of the counting build (stdlib_cl/count.cl): a line of its own
+_COUNT_HOOK = re.compile(r"^\s*COUNT_(EVALUATIONS|MARCH|SCOPE)\(.*\);")
 
 
 def resolve_features(text: str, enabled: dict[str, bool]) -> str:
     """Keep the `#if FEATURE_X` blocks of enabled features (without their
-    directives) and drop the others; other preprocessor lines stay."""
+    directives) and drop the others; other preprocessor lines stay. The
+    counting build's hooks stay only in the counting build (`COUNT`)."""
     out, stack = [], []      # stack: None for a foreign #if, else whether kept
     for line in text.splitlines():
         match = _FEATURE_IF.match(line)
@@ -540,7 +543,7 @@ def resolve_features(text: str, enabled: dict[str, bool]) -> str:
         elif line.startswith("#endif") and stack:
             if stack.pop() is not None:
                 continue
-        if keeping:
+        if keeping and (enabled["COUNT"] or not _COUNT_HOOK.match(line)):
             out.append(line)
     return "\n".join(out)
 

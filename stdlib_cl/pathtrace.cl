@@ -291,9 +291,7 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
         if (!ANY(lit))
             continue;
         if (light[7] != 0.0f) {
-#if FEATURE_COUNT
-            count_march_purpose(COUNT_SHADOWS, params);
-#endif
+            COUNT_MARCH(COUNT_SHADOWS);
             march_result blocker = march(lifted, to_light, lit, pixel_angle, 0.0f, params);
             lit = lit & !(blocker.hit & (blocker.t < reach));
 #if AREA_LIGHTS
@@ -324,9 +322,7 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
     real cosine = v3_dot(n, to_sky);
     mask lit = active & (cosine > 0.0f) & (density > 0.0f);
     if (ANY(lit)) {
-#if FEATURE_COUNT
-        count_march_purpose(COUNT_SHADOWS, params);
-#endif
+        COUNT_MARCH(COUNT_SHADOWS);
         march_result blocker = march(lifted, to_sky, lit, pixel_angle, 0.0f, params);
         lit = lit & !blocker.hit;
 #if AREA_LIGHTS
@@ -447,9 +443,7 @@ vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel
             throughput = v3_scale(throughput, 1.0f / max(going_on, (real)1e-6f));
         }
         active = active & (max(throughput.x, max(throughput.y, throughput.z)) > 0.0f);
-#if FEATURE_COUNT
-        count_march_purpose(COUNT_REFLECTIONS, params);     // a bounce is a reflected ray
-#endif
+        COUNT_MARCH(COUNT_REFLECTIONS);     // a bounce is a reflected ray
         m = march(start, scattered, active, pixel_angle, 0.0f, params);
 #if AREA_LIGHTS
         // a light that the new direction meets before the next surface: its

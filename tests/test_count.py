@@ -177,7 +177,7 @@ def test_every_evaluation_in_the_counting_build_is_counted():
                   and not f.startswith(("real distance_estimate(", "__kernel VECTOR_LANES_HINT void distance_at_points("))]
     assert len(evaluating) >= 6       # march, normals, AO, both shadows, refraction
     for function in evaluating:
-        assert "count_evaluations(" in function, function.split("\n", 1)[0]
+        assert "COUNT_EVALUATIONS(" in function, function.split("\n", 1)[0]
 
 
 def test_bench_count_prints_and_writes_the_counts(tmp_path):

@@ -59,9 +59,7 @@ real cone_start(vec3 origin, vec3 dir, mask active, real t_enter, real t_exit, s
 #endif
     scalar distance = 0.0f, t_evaluated = -1.0f;
     for (int i = 0; i < MAX_STEPS && t < t_last; i++) {
-#if FEATURE_COUNT
-        count_evaluations(COUNT_CAMERA, (LANE_X == 0.0f) & (LANE_Y == 0.0f), 1.0f, params);
-#endif
+        COUNT_EVALUATIONS(COUNT_CAMERA, (LANE_X == 0.0f) & (LANE_Y == 0.0f), 1.0f);
         distance = uniform_distance_estimate(uniform_v3_add(o, uniform_v3_scale(d, t)), params);
         t_evaluated = t;
         *steps = i + 1;

@@ -56,9 +56,7 @@ march_result march_rays(vec3 origin, vec3 dir, mask active, scalar pixel_angle, 
     }
 #endif
     for (int i = first_step; i < MAX_STEPS && ANY(active); i++) {
-#if FEATURE_COUNT
-        count_evaluations(march_purpose(params), active, 1.0f, params);
-#endif
+        COUNT_EVALUATIONS(march_purpose(params), active, 1.0f);
         real d = distance_estimate(v3_add(origin, v3_scale(dir, r.t)), params);
         r.steps = r.steps + SELECT((real)0.0f, (real)1.0f, active);
 #if FEATURE_OVERRELAX

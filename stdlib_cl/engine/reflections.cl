@@ -20,17 +20,13 @@ vec3 reflected_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 se
             return color;
         dir = v3_sub(dir, v3_scale(normal, 2.0f * v3_dot(dir, normal)));
         vec3 start = v3_add(p, v3_scale(normal, 2.0f * threshold));
-#if FEATURE_COUNT
-        count_march_purpose(COUNT_REFLECTIONS, params);
-#endif
+        COUNT_MARCH(COUNT_REFLECTIONS);
         march_result b = march(start, dir, active, pixel_angle, 0.0f, params);
         normal = hit_normal(start, dir, b, pixel_angle, params);
         p = v3_add(start, v3_scale(dir, b.t));
         threshold = hit_threshold(b.t, pixel_angle);
         vec3 seen = background_seen(dir);
-#if FEATURE_COUNT
-        count_scope(b.hit, params);
-#endif
+        COUNT_SCOPE(b.hit);
         if (ANY(b.hit))
             seen = v3_select(seen, shade(p, normal, dir, threshold, b.steps, b.hit, params), b.hit);
 #if FEATURE_FOG

@@ -30,9 +30,7 @@ vec3 through_solid(vec3 p, vec3 dir, vec3 normal, real ior, real threshold, mask
     real t = 0.0f, t_inside = 0.0f;
     mask marching = active;
     for (int i = 0; i < MAX_STEPS && ANY(marching); i++) {
-#if FEATURE_COUNT
-        count_evaluations(COUNT_REFRACTION, marching, 1.0f, params);
-#endif
+        COUNT_EVALUATIONS(COUNT_REFRACTION, marching, 1.0f);
         real d = distance_estimate(v3_add(p, v3_scale(inside_dir, t)), params);
         marching = marching & (d < threshold);
         t_inside = SELECT(t_inside, t, marching);
@@ -42,18 +40,14 @@ vec3 through_solid(vec3 p, vec3 dir, vec3 normal, real ior, real threshold, mask
     // the far side lies between the last point inside and the first one out
     for (int i = 0; i < 8; i++) {
         real middle = 0.5f * (t_inside + t);
-#if FEATURE_COUNT
-        count_evaluations(COUNT_REFRACTION, active, 1.0f, params);
-#endif
+        COUNT_EVALUATIONS(COUNT_REFRACTION, active, 1.0f);
         mask within = distance_estimate(v3_add(p, v3_scale(inside_dir, middle)), params) < threshold;
         t_inside = SELECT(t_inside, middle, within);
         t = SELECT(middle, t, within);
     }
     vec3 exit = v3_add(p, v3_scale(inside_dir, t));
-#if FEATURE_COUNT
-    count_scope(active, params);
-    count_march_purpose(COUNT_REFRACTION, params);
-#endif
+    COUNT_SCOPE(active);
+    COUNT_MARCH(COUNT_REFRACTION);
     vec3 exit_normal = estimate_normal(exit, threshold, params);
     *out_start = v3_add(exit, v3_scale(exit_normal, 2.0f * threshold));
     return refracted(inside_dir, v3_scale(exit_normal, -1.0f), ior);
@@ -74,9 +68,7 @@ vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 
     vec3 beyond_normal = hit_normal(out_start, out_dir, beyond, pixel_angle, params);
     vec3 far = background_seen(out_dir);
     if (ANY(beyond.hit)) {
-#if FEATURE_COUNT
-        count_scope(beyond.hit, params);
-#endif
+        COUNT_SCOPE(beyond.hit);
         vec3 q = v3_add(out_start, v3_scale(out_dir, beyond.t));
         far = v3_select(far, shade(q, beyond_normal, out_dir, hit_threshold(beyond.t, pixel_angle),
                                    beyond.steps, beyond.hit, params), beyond.hit);

@@ -27,9 +27,7 @@ __kernel VECTOR_LANES_HINT void render(__global float *out, __constant scalar *p
     vec3 origin;
     mask seen;       // not outside a fisheye's 360 degrees
     vec3 dir = pixel_ray(camera, width, height, px + 0.5f, py + 0.5f, &origin, &seen);
-#if FEATURE_COUNT
-    count_march_purpose(COUNT_CAMERA, params);
-#endif
+    COUNT_MARCH(COUNT_CAMERA);
     march_result centre = march_camera(origin, dir, inside & seen, pixel_angle, jitter, params);
     vec3 normal = hit_normal(origin, dir, centre, pixel_angle, params);
 
@@ -64,9 +62,7 @@ __kernel VECTOR_LANES_HINT void render(__global float *out, __constant scalar *p
             lens_sample(camera, unit_random(key ^ 0x85ebca6bu), unit_random(key ^ 0xc2b2ae35u),
                         &sample_origin, &sample_dir);
 #endif
-#if FEATURE_COUNT
-            count_march_purpose(COUNT_CAMERA, params);
-#endif
+            COUNT_MARCH(COUNT_CAMERA);
             march_result m = march_camera(sample_origin, sample_dir, inside & sample_seen, pixel_angle, jitter, params);
             vec3 sample_normal = hit_normal(sample_origin, sample_dir, m, pixel_angle, params);
 #if FEATURE_PATH_TRACE
@@ -105,9 +101,7 @@ __kernel VECTOR_LANES_HINT void render(__global float *out, __constant scalar *p
     passes.specular = v3((real)0.0f, 0.0f, 0.0f);
     passes.shadow = 0.0f;
     passes.occlusion = 0.0f;
-#if FEATURE_COUNT
-    count_scope(centre.hit, params);
-#endif
+    COUNT_SCOPE(centre.hit);
     if (ANY(centre.hit))
         shade_passes(v3_add(origin, v3_scale(dir, centre.t)), normal, dir, hit_threshold(centre.t, pixel_angle),
                      centre.steps, centre.hit, params, &passes);

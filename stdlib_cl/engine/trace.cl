@@ -12,9 +12,7 @@ vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixe
     if (ANY(m.hit)) {
         vec3 p = v3_add(origin, v3_scale(dir, m.t));
         real threshold = hit_threshold(m.t, pixel_angle);
-#if FEATURE_COUNT
-        count_scope(m.hit, params);
-#endif
+        COUNT_SCOPE(m.hit);
         color = v3_select(color, shade(p, normal, dir, threshold, m.steps, m.hit, params), m.hit);
     }
 #if FEATURE_TRANSPARENCY
