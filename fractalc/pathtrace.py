@@ -18,19 +18,39 @@ from .resources import resource_dir
 
 LIGHT_KINDS = {"directional": 0, "point": 1, "spot": 3, "sphere": 4, "rectangle": 5}
 HEADLIGHT = 2          # no lights in the scene: a light at the eye
-LIGHT_STRIDE = 19      # numbers per light in the kernel's LIGHTS table
 MAX_IRRADIANCE = 1e20  # light values stay within float's range
+# A row of the kernel's LIGHTS table: each field and its width, in order;
+# the kernel reads them by name (`LIGHT_KIND`, `LIGHT_VECTOR`, ...: the
+# #defines of `light_layout`). `vector`: the direction toward the light, or
+# its position; `irradiance`: pi colour intensity (a white diffuse surface
+# facing the light shows colour intensity, as in the direct renderer);
+# `shadows`: 1 or 0; `axis`: a spot's or rectangle's unit axis; a spot's
+# cone cosines (a sphere's radius where a spot has its outer one); a
+# rectangle's two edges.
+LIGHT_FIELDS = (("kind", 1), ("vector", 3), ("irradiance", 3), ("shadows", 1), ("axis", 3),
+                ("cone_outer", 1), ("cone_inner", 1), ("width", 3), ("height", 3))
+LIGHT_RADIUS = "cone_outer"    # the field that holds a sphere light's radius
+LIGHT_STRIDE = sum(width for _, width in LIGHT_FIELDS)
+
+
+def light_layout() -> list[str]:
+    """The table's layout and the light kinds' codes, as #defines."""
+    offsets, at = {}, 0
+    for name, width in LIGHT_FIELDS:
+        offsets[name], at = at, at + width
+    return [*(f"#define LIGHT_{name.upper()} {offset}" for name, offset in offsets.items()),
+            f"#define LIGHT_RADIUS {offsets[LIGHT_RADIUS]}", f"#define LIGHT_STRIDE {LIGHT_STRIDE}",
+            *(f"#define LIGHT_IS_{kind.upper()} {code}" for kind, code in LIGHT_KINDS.items()),
+            f"#define LIGHT_IS_HEADLIGHT {HEADLIGHT}"]
 
 
 def _light_row(kind: int, vector, color, intensity: float, shadows: bool,
                axis=(0.0, 0.0, -1.0), cone=(-1.0, -1.0), edges=(0.0,) * 6) -> list[float]:
-    """kind, the direction toward the light or its position, irradiance
-    (pi colour intensity: a white diffuse surface facing the light shows
-    colour intensity, as in the direct renderer), whether it casts
-    shadows, a spot's unit axis and cone cosines (outer, inner), and a
-    rectangle's two edges."""
+    """The table's row of a light (LIGHT_FIELDS)."""
     irradiance = [min(math.pi * c * intensity, MAX_IRRADIANCE) for c in color]
-    return [float(kind), *vector, *irradiance, 1.0 if shadows else 0.0, *axis, *cone, *edges]
+    fields = {"kind": (float(kind),), "vector": vector, "irradiance": irradiance, "shadows": (1.0 if shadows else 0.0,),
+              "axis": axis, "cone_outer": cone[:1], "cone_inner": cone[1:], "width": edges[:3], "height": edges[3:]}
+    return [float(v) for name, _ in LIGHT_FIELDS for v in fields[name]]
 
 
 def lights_table(scene: CheckedScene) -> list[list[float]]:
@@ -296,7 +316,7 @@ def source(scene: CheckedScene, literal, transparency: bool) -> str:
     whether some material is transparent (the template's FEATURE_TRANSPARENCY)."""
     render = scene.render
     rows = lights_table(scene)
-    constants = [f"#define BOUNCES {render.bounces}", f"#define LIGHT_STRIDE {LIGHT_STRIDE}",
+    constants = [f"#define BOUNCES {render.bounces}", *light_layout(),
                  f"#define CAMERA_SEES_ENVIRONMENT {int(render.background != 'transparent')}",
                  f"#define PATH_TRANSPARENCY {int(transparency)}",
                  f"#define AREA_LIGHTS {int(any(light.kind in ('sphere', 'rectangle') for light in scene.lights))}",
