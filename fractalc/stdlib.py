@@ -15,7 +15,7 @@ and constraints `>X`, `>=X`, `<=X`, `<X`, `A..B` (inclusive), `nonzero`, or
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from string import Template
 
@@ -27,6 +27,7 @@ DISTANCE_KERNEL = "distance.cl"
 # in stdlib_cl/engine/, in the order the kernel holds them (each after what
 # it uses); its `#if FEATURE_` blocks hold the optional effects.
 ENGINE_DIR = "engine"
+BOUND_RADIUS = "_bound_radius"   # the suffix of a shape's bounding radius function (Signature.bound_radius)
 ENGINE = (
     "interface",     # what the generated code defines; the camera argument's layout
     "hits",          # Hart's hit threshold; a march's result
@@ -60,6 +61,10 @@ class Signature:
     name: str
     parameters: tuple[Parameter, ...]
     function: str = ""             # the OpenCL function implementing it
+    # the library function `NAME_bound_radius` of its arguments, where the
+    # library has one: the radius of a sphere about the origin holding the
+    # shape ("": unbounded, or not known)
+    bound_radius: str = ""
 
 
 @dataclass(frozen=True)
@@ -204,6 +209,8 @@ def library() -> Library:
     from .fractals import FRACTALS    # the fractals are IR, their signatures beside them
     for name, (parameters, _) in FRACTALS.items():
         signatures[name] = Signature("fractal", name, tuple(_parse_parameter(a) for a in _split_top_level(parameters)))
+    signatures = {name: replace(sig, bound_radius=name + BOUND_RADIUS) if name + BOUND_RADIUS in functions else sig
+                  for name, sig in signatures.items()}
     names = set(functions)
     with_calls = {}
     for f in functions.values():
