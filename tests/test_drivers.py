@@ -153,8 +153,8 @@ def test_a_pocl_that_cannot_build_here_is_reported_and_intel_renders(tmp_path):
     assert "Invalid build option: -Xclang" in line and "fix: use device" in line
     # a driver that builds nothing is probed once, at one width, and remembered
     entries = json.loads((tmp_path / "cache" / "lanes.json").read_text())
-    unusable = [e for key, e in entries.items() if "PoCL" in key]
-    assert [(e["lanes"], [w for w, _ in e["failures"]]) for e in unusable] == [(None, [16])]
+    unusable = [e for key, e in entries.items() if "PoCL" in key]      # pip's, and a system's PoCL if any
+    assert unusable and all((e["lanes"], [w for w, _ in e["failures"]]) == (None, [16]) for e in unusable)
 
 
 def pocl_builds_here() -> bool:
@@ -169,7 +169,8 @@ def test_the_default_falls_to_the_next_driver_with_a_note(tmp_path):
     first = fractalc_command(RENDER + [str(tmp_path / "a.png")], tmp_path, **BROKEN_INTEL)
     assert first.returncode == 0, first.stderr
     note = next(line for line in first.stderr.splitlines() if line.startswith("fractalc: note:"))
-    assert "the OpenCL device 'Intel(R)" in note and "cannot build fractalc's kernels on this CPU" in note
+    # Intel's runtime names the device after the CPU ('AMD EPYC' on an AMD machine)
+    assert "(Intel(R) OpenCL" in note and "cannot build fractalc's kernels on this CPU" in note
     assert "using device" in note and "PoCL" in note
     again = fractalc_command(RENDER + [str(tmp_path / "b.png")], tmp_path, **BROKEN_INTEL)
     assert again.returncode == 0 and "note:" not in again.stderr, "the verdict is remembered"
