@@ -335,25 +335,25 @@ def _unit(v) -> tuple[float, ...]:
     return tuple(c / length for c in v)
 
 
-def _light_from_direction(light: Light, radiance: str) -> list[str]:
+def _light_from_direction(light: Light, radiance: str) -> str:
     # the file gives the direction the light travels
-    return [_shade_template("light_from_direction", to_light=_vector(tuple(-c for c in _unit(light.vector))),
-                            radiance=radiance)]
+    return _shade_template("light_from_direction", to_light=_vector(tuple(-c for c in _unit(light.vector))),
+                           radiance=radiance)
 
 
-def _light_from_position(light: Light, radiance: str) -> list[str]:
-    return [_shade_template("light_from_position", position=_vector(light.vector), radiance=radiance,
-                            max_inverse_square=literal(MAX_INVERSE_SQUARE))]
+def _light_from_position(light: Light, radiance: str) -> str:
+    return _shade_template("light_from_position", position=_vector(light.vector), radiance=radiance,
+                           max_inverse_square=literal(MAX_INVERSE_SQUARE))
 
 
-def _spot_cone(light: Light) -> list[str]:
+def _spot_cone(light: Light) -> str:
     inner, outer = light.cone_cosines()
-    return [_shade_template("spot_cone", outer=literal(outer), inner=literal(max(inner, outer + 1e-6)),
-                            axis=_vector(_unit(light.direction)))]
+    return _shade_template("spot_cone", outer=literal(outer), inner=literal(max(inner, outer + 1e-6)),
+                           axis=_vector(_unit(light.direction)))
 
 
-def _rectangle_facing(light: Light) -> list[str]:
-    return [_shade_template("rectangle_facing", facing=_vector(_unit(light.direction)))]
+def _rectangle_facing(light: Light) -> str:
+    return _shade_template("rectangle_facing", facing=_vector(_unit(light.direction)))
 
 
 # The direct renderer's lights, by kind: where the light comes from (toward
@@ -373,7 +373,7 @@ def _light_block(index: int, light: Light, bound, transparent: bool, passes: boo
     radiance = _vector(tuple(min(c * light.intensity, MAX_RADIANCE) for c in light.color))
     source, shapings = DIRECT_LIGHTS[light.kind]
     lines = [_shade_template("light_start", index=index, kind=light.kind, shadows=light.shadows),
-             *source(light, radiance), *(line for shaping in shapings for line in shaping(light))]
+             source(light, radiance), *(shaping(light) for shaping in shapings)]
     needs = set()
     widened = _shadow_bound_radius(light)
     if bound is not None and widened is not None:

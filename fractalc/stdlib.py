@@ -11,6 +11,11 @@ ARG is `name: type [= default] [constraint ...]`, with types `num`, `int`,
 and constraints `>X`, `>=X`, `<=X`, `<X`, `A..B` (inclusive), `nonzero`, or
 `<=other_arg`. The language-level forms that are not library functions
 (combinators, transforms, math) are tabled below.
+
+Besides the library: the prelude, the engine (`engine/`, the fixed part of
+every render kernel, ENGINE), the kernel of distances at points, and the
+templates of what the emitter writes per scene (`shade.cl`, `scene.cl`:
+`templates`).
 """
 from __future__ import annotations
 
