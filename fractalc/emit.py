@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from . import __version__, ir, pathtrace
 from .lower import POINT, SceneIR
 from .schedule import ForBlock, Hoist, IfBlock, schedule, varying
-from .passes import PASSES, channels
+from .passes import PASSES, SHADING_PASSES, channels
 from .program import Light
 from .stdlib import library, templates
 
@@ -493,7 +493,7 @@ def features(scene_ir: SceneIR) -> dict[str, bool]:
         "TRANSPARENT_BACKGROUND": render.background == "transparent",
         # the passes asked for beyond the default channels (run.PASSES)
         **{f"PASS_{name.upper()}": name in render.aovs for name in PASSES},
-        "SHADING_PASSES": bool({"diffuse", "specular", "shadow", "ao"} & set(render.aovs)),
+        "SHADING_PASSES": bool(set(SHADING_PASSES) & set(render.aovs)),
         "PATH_TRACE": render.integrator == "path",
         "ENVIRONMENT": pathtrace.uses_environment(render),
     }
