@@ -19,16 +19,12 @@ from . import __version__, ir, pathtrace
 from .lower import POINT, SceneIR
 from .schedule import ForBlock, Hoist, IfBlock, schedule, varying
 from .passes import PASSES, SHADING_PASSES, channels
+from .lights import LIGHT_KINDS, MAX_RADIANCE
 from .program import Light
 from .stdlib import library, templates
 
 AMBIENT = 0.25          # ambient light, times the material's colour and AO
 AO_DELTA = 0.05         # spacing of the AO samples along the normal
-# A light's radiance, and a point light's inverse-square factor, are capped so
-# that sums of lights, their reflections and fog stay finite in float (no
-# inf, no inf * 0 = NaN under a shadow) however bright the scene makes them
-MAX_RADIANCE = 1e20
-MAX_INVERSE_SQUARE = 1e8
 
 
 @dataclass(frozen=True)
@@ -330,50 +326,19 @@ def _bound_function(scene_ir: SceneIR, with_half_spaces: bool) -> str:
     return text
 
 
-def _unit(v) -> tuple[float, ...]:
-    length = sum(c * c for c in v) ** 0.5
-    return tuple(c / length for c in v)
-
-
-def _light_from_direction(light: Light, radiance: str) -> str:
-    # the file gives the direction the light travels
-    return _shade_template("light_from_direction", to_light=_vector(tuple(-c for c in _unit(light.vector))),
-                           radiance=radiance)
-
-
-def _light_from_position(light: Light, radiance: str) -> str:
-    return _shade_template("light_from_position", position=_vector(light.vector), radiance=radiance,
-                           max_inverse_square=literal(MAX_INVERSE_SQUARE))
-
-
-def _spot_cone(light: Light) -> str:
-    inner, outer = light.cone_cosines()
-    return _shade_template("spot_cone", outer=literal(outer), inner=literal(max(inner, outer + 1e-6)),
-                           axis=_vector(_unit(light.direction)))
-
-
-def _rectangle_facing(light: Light) -> str:
-    return _shade_template("rectangle_facing", facing=_vector(_unit(light.direction)))
-
-
-# The direct renderer's lights, by kind: where the light comes from (toward
-# it, how far, how bright), and what then shapes its radiance. Sphere and
-# rectangle lights shine from their centres here (the path tracer samples
-# their areas: stdlib_cl/pathtrace.cl).
-DIRECT_LIGHTS = {
-    "directional": (_light_from_direction, ()),
-    "point": (_light_from_position, ()),
-    "sphere": (_light_from_position, ()),
-    "spot": (_light_from_position, (_spot_cone,)),
-    "rectangle": (_light_from_position, (_rectangle_facing,)),
-}
+def _filled(template: str, values: dict) -> str:
+    """A template of shade.cl with numbers as literals and vectors as v3s."""
+    return _shade_template(template, **{name: _vector(v) if isinstance(v, tuple) else literal(v)
+                                        for name, v in values.items()})
 
 
 def _light_block(index: int, light: Light, bound, transparent: bool, passes: bool) -> tuple[str, set[str]]:
-    radiance = _vector(tuple(min(c * light.intensity, MAX_RADIANCE) for c in light.color))
-    source, shapings = DIRECT_LIGHTS[light.kind]
+    kind = LIGHT_KINDS[light.kind]
+    radiance = tuple(min(c * light.intensity, MAX_RADIANCE) for c in light.color)
+    origin, values = kind.origin(light)
     lines = [_shade_template("light_start", index=index, kind=light.kind, shadows=light.shadows),
-             source(light, radiance), *(shaping(light) for shaping in shapings)]
+             _filled(origin, {**values, "radiance": radiance}),
+             *(_filled(*shaping(light)) for shaping in kind.shaping)]
     needs = set()
     widened = _shadow_bound_radius(light)
     if bound is not None and widened is not None:

@@ -1,77 +1,20 @@
 """The path tracer's part of a kernel (render key `integrator: path`,
 docs/looks.md#path-tracing): its constants (bounces, the lights as a
-table) and the library file stdlib_cl/pathtrace.cl, which the emitter
-places after the template; and the environment's constants, which both
+table: fractalc/lights.py) and the library file stdlib_cl/pathtrace.cl,
+which the emitter places after the engine; and the environment's constants, which both
 integrators use: the sky or map, the map's sampling tables, and the
 irradiance that lights the direct renderer's surfaces as spherical
 harmonics (docs/looks.md#environment)."""
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from functools import lru_cache
 
 import numpy as np
 
+from .lights import MAX_IRRADIANCE, light_layout, lights_table
 from .program import CheckedScene
 from .resources import resource_dir
-
-LIGHT_KINDS = {"directional": 0, "point": 1, "spot": 3, "sphere": 4, "rectangle": 5}
-HEADLIGHT = 2          # no lights in the scene: a light at the eye
-MAX_IRRADIANCE = 1e20  # light values stay within float's range
-# A row of the kernel's LIGHTS table: each field and its width, in order;
-# the kernel reads them by name (`LIGHT_KIND`, `LIGHT_VECTOR`, ...: the
-# #defines of `light_layout`). `vector`: the direction toward the light, or
-# its position; `irradiance`: pi colour intensity (a white diffuse surface
-# facing the light shows colour intensity, as in the direct renderer);
-# `shadows`: 1 or 0; `axis`: a spot's or rectangle's unit axis; a spot's
-# cone cosines (a sphere's radius where a spot has its outer one); a
-# rectangle's two edges.
-LIGHT_FIELDS = (("kind", 1), ("vector", 3), ("irradiance", 3), ("shadows", 1), ("axis", 3),
-                ("cone_outer", 1), ("cone_inner", 1), ("width", 3), ("height", 3))
-LIGHT_RADIUS = "cone_outer"    # the field that holds a sphere light's radius
-LIGHT_STRIDE = sum(width for _, width in LIGHT_FIELDS)
-
-
-def light_layout() -> list[str]:
-    """The table's layout and the light kinds' codes, as #defines."""
-    offsets, at = {}, 0
-    for name, width in LIGHT_FIELDS:
-        offsets[name], at = at, at + width
-    return [*(f"#define LIGHT_{name.upper()} {offset}" for name, offset in offsets.items()),
-            f"#define LIGHT_RADIUS {offsets[LIGHT_RADIUS]}", f"#define LIGHT_STRIDE {LIGHT_STRIDE}",
-            *(f"#define LIGHT_IS_{kind.upper()} {code}" for kind, code in LIGHT_KINDS.items()),
-            f"#define LIGHT_IS_HEADLIGHT {HEADLIGHT}"]
-
-
-def _light_row(kind: int, vector, color, intensity: float, shadows: bool,
-               axis=(0.0, 0.0, -1.0), cone=(-1.0, -1.0), edges=(0.0,) * 6) -> list[float]:
-    """The table's row of a light (LIGHT_FIELDS)."""
-    irradiance = [min(math.pi * c * intensity, MAX_IRRADIANCE) for c in color]
-    fields = {"kind": (float(kind),), "vector": vector, "irradiance": irradiance, "shadows": (1.0 if shadows else 0.0,),
-              "axis": axis, "cone_outer": cone[:1], "cone_inner": cone[1:], "width": edges[:3], "height": edges[3:]}
-    return [float(v) for name, _ in LIGHT_FIELDS for v in fields[name]]
-
-
-def lights_table(scene: CheckedScene) -> list[list[float]]:
-    rows = []
-    for light in scene.lights:
-        vector = light.vector
-        if light.kind == "directional":   # the file gives the direction light travels
-            length = math.sqrt(sum(c * c for c in vector))
-            vector = tuple(-c / length for c in vector)
-        length = math.sqrt(sum(c * c for c in light.direction))
-        inner, outer = light.cone_cosines()
-        # a spot's cone cosines, or a sphere light's radius
-        cone = (light.radius, 0.0) if light.kind == "sphere" else (outer, max(inner, outer + 1e-6))
-        edges = sum(light.rectangle_edges(), ()) if light.kind == "rectangle" else (0.0,) * 6
-        rows.append(_light_row(LIGHT_KINDS[light.kind], vector, light.color, light.intensity,
-                               light.shadows != "none", tuple(c / length for c in light.direction), cone, edges))
-    if not rows and scene.render.environment is None and scene.render.environment_map is None:
-        # nothing lights the scene: a headlight
-        rows.append(_light_row(HEADLIGHT, (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 1.0, True))
-    return rows
-
 
 def uses_environment(render) -> bool:
     """Whether the kernel has the template's `environment` (the sky): an

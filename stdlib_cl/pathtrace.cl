@@ -8,7 +8,7 @@
 //                           then has through_solid)
 //   LIGHT_COUNT, LIGHTS[]   LIGHT_STRIDE numbers per light, each field at
 //                           its offset LIGHT_KIND, LIGHT_VECTOR, ...
-//                           (pathtrace.LIGHT_FIELDS says what they hold);
+//                           (lights.LIGHT_FIELDS says what they hold);
 //                           its kind one of the codes LIGHT_IS_POINT, ...
 //   AREA_LIGHTS             1 where a light is a sphere or a rectangle
 //   MIS                     1: light that both next-event estimation and the

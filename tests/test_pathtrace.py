@@ -559,7 +559,7 @@ def test_multiple_importance_sampling_lowers_the_error_on_a_glossy_floor_under_a
 def test_the_lights_table_holds_each_field_at_its_named_offset():
     """The kernel reads the LIGHTS table by the offsets `light_layout`
     defines: each light's row holds its values there."""
-    from fractalc import pathtrace
+    from fractalc import lights
     scene = fractalc.loads("""
     light spot { position: (1, 2, 3), direction: (0, 0, -2), angle: 30, falloff: 10, intensity: 2 }
     light sphere { position: (0.2, 0, 2), radius: 0.4, intensity: 4, shadows: none }
@@ -567,8 +567,8 @@ def test_the_lights_table_holds_each_field_at_its_named_offset():
     scene sphere(1)
     render { integrator: path }
     """).checked
-    at = {name: int(value) for line in pathtrace.light_layout() for _, name, value in [line.split()]}
-    spot, sphere, rectangle = pathtrace.lights_table(scene)
+    at = {name: int(value) for line in lights.light_layout() for _, name, value in [line.split()]}
+    spot, sphere, rectangle = lights.lights_table(scene)
     assert all(len(row) == at["LIGHT_STRIDE"] for row in (spot, sphere, rectangle))
     assert [row[at["LIGHT_KIND"]] for row in (spot, sphere, rectangle)] == [
         at["LIGHT_IS_SPOT"], at["LIGHT_IS_SPHERE"], at["LIGHT_IS_RECTANGLE"]]
