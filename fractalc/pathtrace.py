@@ -12,7 +12,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .lights import MAX_IRRADIANCE, light_layout, lights_table
+from .lights import LIGHT_STRIDE, MAX_INVERSE_SQUARE, MAX_IRRADIANCE, light_layout, lights_table
 from .program import CheckedScene
 from .resources import resource_dir
 
@@ -260,6 +260,7 @@ def source(scene: CheckedScene, literal, transparency: bool) -> str:
     render = scene.render
     rows = lights_table(scene)
     constants = [f"#define BOUNCES {render.bounces}", *light_layout(),
+                 f"#define MAX_INVERSE_SQUARE {literal(MAX_INVERSE_SQUARE)}",
                  f"#define CAMERA_SEES_ENVIRONMENT {int(render.background != 'transparent')}",
                  f"#define PATH_TRANSPARENCY {int(transparency)}",
                  f"#define AREA_LIGHTS {int(any(light.kind in ('sphere', 'rectangle') for light in scene.lights))}",

@@ -11,6 +11,7 @@
 //                           (lights.LIGHT_FIELDS says what they hold);
 //                           its kind one of the codes LIGHT_IS_POINT, ...
 //   AREA_LIGHTS             1 where a light is a sphere or a rectangle
+//   MAX_INVERSE_SQUARE      the cap of a light's 1 / d^2 (as the direct renderer's)
 //   MIS                     1: light that both next-event estimation and the
 //                           surface's lobes can find is weighted between them
 //                           (the power heuristic); 0: next-event estimation's
@@ -258,7 +259,7 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
             reach = v3_length(offset);
             to_light = v3_scale(offset, 1.0f / max(reach, (real)1e-30f));
             if (!headlight)
-                falloff = fmin(1.0f / (reach * reach), 1e8f);
+                falloff = fmin(1.0f / (reach * reach), MAX_INVERSE_SQUARE);
             if (light[LIGHT_KIND] == LIGHT_IS_SPOT)   // a spot's cone: smoothstep across its falloff
                 falloff = falloff * smoothstep(light[LIGHT_CONE_OUTER], light[LIGHT_CONE_INNER],
                                                -v3_dot(to_light, light_vec3(light, LIGHT_AXIS)));
@@ -290,7 +291,7 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
                 reach = v3_length(offset);
                 to_light = v3_scale(offset, 1.0f / max(reach, (real)1e-30f));
                 real facing = -v3_dot(to_light, light_vec3(light, LIGHT_AXIS));
-                falloff = fmin(max(facing, 0.0f) / (reach * reach), 1e8f);
+                falloff = fmin(max(facing, 0.0f) / (reach * reach), MAX_INVERSE_SQUARE);
                 light_density = reach * reach / max(rectangle_area(light) * facing, (real)1e-30f);
             }
         }
