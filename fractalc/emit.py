@@ -721,7 +721,8 @@ def _uniform_copy(prelude: str, functions, distance: str) -> str:
     text = "\n\n".join([vectors, *(f.source for f in functions), distance])
     renames = {**_UNIFORM_NAMES, **{name: f"uniform_{name}" for name in _FUNCTION_NAME.findall(text)}}
     renamed = _IDENTIFIER.sub(lambda m: renames.get(m.group(0), m.group(0)), text)
-    return _scene_template("uniform_copy", functions=renamed)
+    return ("// The distance estimate in scalar types, at one point for a work-item's rays (cone marching)\n"
+            "#define UNIFORM_SELECT(if_false, if_true, m) ((m) ? (if_true) : (if_false))\n" + renamed)
 
 
 def _normal_functions(method: str) -> str:

@@ -47,11 +47,6 @@ forward_normal(p, distance_estimate(p, params), h, params)
 //@ forward_normal_at_hit  forward differences reusing the march's last estimate
 forward_normal(p, here, h, params)
 
-//@ uniform_copy  `$functions`: the estimate and what it calls, in scalar types (emit.py `_uniform_copy`)
-// The distance estimate in scalar types, at one point for a work-item's rays (cone marching)
-#define UNIFORM_SELECT(if_false, if_true, m) ((m) ? (if_true) : (if_false))
-$functions
-
 //@ uniform_values  a kernel writing point-independent values (a scene's bound) into `out`, one work-item
 __kernel void uniform_values(__constant scalar *params, __global scalar *out) {
 ${body}${stores}}
