@@ -214,8 +214,6 @@ def library() -> Library:
     from .fractals import FRACTALS    # the fractals are IR, their signatures beside them
     for name, (parameters, _) in FRACTALS.items():
         signatures[name] = Signature("fractal", name, tuple(_parse_parameter(a) for a in _split_top_level(parameters)))
-    signatures = {name: replace(sig, bound_radius=name + BOUND_RADIUS) if name + BOUND_RADIUS in functions else sig
-                  for name, sig in signatures.items()}
     names = set(functions)
     with_calls = {}
     for f in functions.values():
@@ -223,6 +221,9 @@ def library() -> Library:
         called = {m for m in _IDENTIFIER.findall(body) if m in names and m != f.name}
         with_calls[f.name] = Function(f.name, f.source, f.header, f.file, tuple(sorted(called)),
                                       f.parameter_types)
+    # each shape's bounding radius, where the library has one
+    signatures = {name: replace(sig, bound_radius=name + BOUND_RADIUS) if name + BOUND_RADIUS in functions else sig
+                  for name, sig in signatures.items()}
     engine = "\n\n".join((root / ENGINE_DIR / f"{name}.cl").read_text().rstrip("\n") for name in ENGINE)
     return Library(with_calls, signatures, (root / PRELUDE).read_text(), engine, (root / DISTANCE_KERNEL).read_text())
 
