@@ -2,7 +2,13 @@
 device of the machine (each driver fractalc registers, and any the system
 has), as `fractalc.loads(..., device=driver)`; a device whose driver cannot
 build fractalc's kernels here is skipped with the driver's own reason. The
-rest of the suite runs on the default device."""
+rest of the suite runs on the default device.
+
+The `opencl` marker: a test that builds or runs a kernel carries it; every
+other test (parse, check, lower, emit, the command line's mistakes) runs
+with OpenCL out of reach, so `pytest -m "not opencl"` tests the stages
+before `build` in seconds, on a machine without a driver too, and a test
+that reaches for a device without the marker fails at once."""
 from __future__ import annotations
 
 import re
@@ -63,3 +69,26 @@ def pytest_configure(config):
                 f.write(json.dumps({"text": text, "path": str(path)}) + "\n")
         return original(text, *args, **kwargs)
     api.loads = fractalc.loads = recording_loads
+
+
+class OpenCLWithoutMarker(AssertionError):
+    pass
+
+
+@pytest.fixture(autouse=True)
+def _opencl_only_where_marked(request, monkeypatch, tmp_path_factory):
+    """Out of reach for a test without the `opencl` marker: pyopencl's
+    platforms, contexts, programs and buffers in this process (a device
+    opened by an earlier test stays cached), and every driver for the
+    processes it starts (an empty vendors folder, no bundled driver)."""
+    if request.node.get_closest_marker("opencl"):
+        return
+    import pyopencl
+    from fractalc import drivers
+
+    def refused(*args, **kwargs):
+        raise OpenCLWithoutMarker(f"{request.node.nodeid} uses OpenCL: mark it @pytest.mark.opencl")
+    for name in ("get_platforms", "Context", "Program", "Buffer"):
+        monkeypatch.setattr(pyopencl, name, refused)
+    monkeypatch.setenv(drivers.VENDORS_ENVIRONMENT, str(tmp_path_factory.mktemp("no-opencl-vendors")))
+    monkeypatch.setenv(drivers.SWITCH_ENVIRONMENT, "0")

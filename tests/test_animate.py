@@ -54,6 +54,7 @@ def metadata(path):
     return {a.name.removeprefix("fractalc:"): a.value for a in spec.extra_attribs if a.name.startswith("fractalc:")}
 
 
+@pytest.mark.opencl
 def test_animate_renders_every_frame_and_resumes_after_deletions(scene_file, tmp_path):
     result = fractalc_cli("animate", scene_file, "-o", "frames/frame_%04d.png", "--fps", 4, cwd=tmp_path)
     assert result.returncode == 0, result.stderr
@@ -71,6 +72,7 @@ def test_animate_renders_every_frame_and_resumes_after_deletions(scene_file, tmp
         assert (now == stamp) == (name not in ("frame_0001.png", "frame_0003.png")), name
 
 
+@pytest.mark.opencl
 def test_each_frame_has_the_path_camera_and_params(scene_file, tmp_path):
     scene = fractalc.load(scene_file, params={"r": 0.8})
     files, rendered = render_frames(scene, str(tmp_path / "f_%02d.exr"), fps=4)
@@ -89,6 +91,7 @@ def frame_pixels(file):
     return oiio.ImageBuf(str(file)).get_pixels(oiio.FLOAT)
 
 
+@pytest.mark.opencl
 def test_frame_ranges_share_an_animation(scene_file, tmp_path):
     # two machines, one folder: 0-1 and 2- make the frames one run makes
     scene = fractalc.load(scene_file)
@@ -107,6 +110,7 @@ def test_frame_ranges_share_an_animation(scene_file, tmp_path):
     assert render_frames(scene, pattern, fps=4)[1] == 0
 
 
+@pytest.mark.opencl
 def test_animate_frames_option_renders_one_frame_or_a_clamped_range(scene_file, tmp_path, capsys):
     pattern = str(tmp_path / "f_%d.png")
     assert main(["animate", str(scene_file), "-o", pattern, "--fps", "4", "--frames", "3"]) == 0
@@ -118,6 +122,7 @@ def test_animate_frames_option_renders_one_frame_or_a_clamped_range(scene_file, 
     assert sorted(os.listdir(tmp_path)) == sorted([scene_file.name, "f_3.png", "f_4.png"])
 
 
+@pytest.mark.opencl
 def test_animate_writes_an_mp4_of_the_frames(scene_file, tmp_path):
     # both in the test extra: a missing one fails here, it does not skip
     import imageio.v2 as imageio

@@ -22,6 +22,7 @@ FIGURES = {"scene", "width", "height", "frames", "repeat", "compile_seconds", "d
            "precision", "lanes"}
 
 
+@pytest.mark.opencl
 def test_bench_json_holds_every_figure_and_they_agree(tmp_path):
     scene_file = tmp_path / "scene.frac"
     scene_file.write_text(SCENE)
@@ -72,6 +73,7 @@ def test_resolution_names_and_bad_arguments(tmp_path):
     assert zero.returncode == 2 and "--frames" in zero.stderr
 
 
+@pytest.mark.opencl
 def test_render_with_another_camera_does_not_rebuild():
     from fractalc import build
     scene = fractalc.loads(SCENE)
@@ -100,6 +102,7 @@ def test_bench_follows_the_scenes_path_from_first_to_last_keyframe():
     assert middle.position != pytest.approx(first.position)
 
 
+@pytest.mark.opencl
 def test_still_bench_renders_the_files_own_view_every_frame():
     from fractalc.bench import bench, bench_view
     scene = fractalc.loads("""

@@ -110,6 +110,7 @@ POINTS = [(0, 0, 0.2), (0.6, 0.3, 0.5), (-0.7, -0.4, -0.2), (0.3, 0.8, 1.0)]
                                   {"projection": "fisheye", "fisheye_fov": 180},
                                   {"projection": "fisheye", "fisheye_fov": 300},
                                   {"projection": "equirectangular"}])
+@pytest.mark.opencl
 def test_points_land_on_their_projected_pixels(keys):
     scene = fractalc.loads(SCENE)
     width, height = (64, 32) if keys["projection"] == "equirectangular" else (64, 48)
@@ -125,6 +126,7 @@ def test_points_land_on_their_projected_pixels(keys):
 
 @pytest.mark.parametrize("projection, stereo", [("pinhole", "side_by_side"), ("pinhole", "top_bottom"),
                                                 ("fisheye", "side_by_side"), ("equirectangular", "top_bottom")])
+@pytest.mark.opencl
 def test_each_eye_sees_from_its_own_place(projection, stereo):
     scene = fractalc.loads(SCENE)
     width, height = (64, 64) if stereo == "top_bottom" else (96, 32)
@@ -147,6 +149,7 @@ def test_each_eye_sees_from_its_own_place(projection, stereo):
         assert disparity[(0.3, -1.5, 0.5)] > 2 and disparity[(0.2, 1.5, 0)] < -0.5
 
 
+@pytest.mark.opencl
 def test_the_360_image_wraps_seamlessly():
     text = """
     scene sphere(0.4).translate((1, 2, 0.2)) | box(0.5).translate((-1.5, -1, 0)) | plane(offset: -0.6)
@@ -168,6 +171,7 @@ def test_the_360_image_wraps_seamlessly():
     assert np.abs(b[:, 31] - b[:, 32]).mean() == pytest.approx(seam, abs=2e-3)
 
 
+@pytest.mark.opencl
 def test_fisheye_pixels_past_360_degrees_are_empty():
     scene = fractalc.loads("scene plane(offset: -1) | sphere(30).onion(0.1)\nrender { width: 64, height: 32 }")
     image = scene.render(camera=Camera(position=(0, 0, 0), target=(0, 1, 0), projection="fisheye",
@@ -178,6 +182,7 @@ def test_fisheye_pixels_past_360_degrees_are_empty():
     assert np.all(image.rgba[..., 3][rho < 0.98] == 1)
 
 
+@pytest.mark.opencl
 def test_animation_keeps_the_projection():
     from fractalc.animate import render_frame
     scene = fractalc.loads("""
@@ -214,6 +219,7 @@ def test_a_path_keyframe_does_not_take_the_projection():
     assert "'path' has no key 'projection'" in str(caught.value)
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("build", [{"lanes": 1}, {"precision": "double"}])
 def test_every_camera_renders_alike_on_one_lane_and_in_double(build):
     text = SCENE.replace("samples: 16", "samples: 4") + "\nlight directional { direction: (-1, 1, -1) }"

@@ -100,6 +100,7 @@ def rendered(tmp_path_factory):
 
 # ------------------------------------------------------------------ outputs
 
+@pytest.mark.opencl
 def test_png_is_8_bit_rgba_of_the_requested_size(rendered):
     pixels, names, spec = read_image(rendered / "out.png")
     assert (spec.width, spec.height, spec.nchannels) == (W, H, 4)
@@ -110,6 +111,7 @@ def test_png_is_8_bit_rgba_of_the_requested_size(rendered):
     assert pixels[H // 2, W // 2, 3] == 1.0
 
 
+@pytest.mark.opencl
 def test_png_is_the_srgb_encoding_of_the_exr(rendered):
     # through the default tone curve (tested against its formula in test_looks.py)
     from fractalc.write import tone_mapped
@@ -120,6 +122,7 @@ def test_png_is_the_srgb_encoding_of_the_exr(rendered):
     assert np.abs(png[..., :3] - srgb * 255).max() <= 1.0
 
 
+@pytest.mark.opencl
 def test_exr_channels_and_planes(rendered):
     pixels, names, spec = read_image(rendered / "out.exr")
     assert (spec.width, spec.height) == (W, H)
@@ -142,6 +145,7 @@ def test_exr_channels_and_planes(rendered):
     np.testing.assert_allclose(background, np.broadcast_to([0.1, 0.1, 0.2], background.shape), atol=1e-6)
 
 
+@pytest.mark.opencl
 def test_exr_metadata_describes_the_render(rendered):
     _, _, spec = read_image(rendered / "out.exr")
     assert numbers(attribute(spec, "camera", "position")) == list(CAMERA["position"])
@@ -162,6 +166,7 @@ def test_exr_metadata_describes_the_render(rendered):
 
 # ---------------------------------------------------------------------- --set
 
+@pytest.mark.opencl
 def test_set_changes_the_image(rendered):
     result = fractalc_cli("render", "scene.frac", "-o", "bigger.exr", "--width", W, "--height", H,
                           "--set", "r=1.4", "-q", cwd=rendered)
@@ -272,6 +277,7 @@ def test_unwritable_output_is_a_one_line_runtime_error(tmp_path, output):
     assert leftovers(tmp_path) == []
 
 
+@pytest.mark.opencl
 def test_a_good_render_replaces_an_existing_file(tmp_path):
     (tmp_path / "scene.frac").write_text(SCENE)
     (tmp_path / "out.png").write_bytes(b"old")
@@ -327,6 +333,7 @@ def device_lines(tmp_path_factory):
     return [line[2:] for line in lines]
 
 
+@pytest.mark.opencl
 def test_devices_lists_at_least_one(device_lines):
     assert len(device_lines) >= 1
     assert device_lines[0].startswith("0")
@@ -347,6 +354,7 @@ def _device_name(line):
     return re.match(r"\s*\d+\s*[:.)-]?\s*(.*?)\s*(\[|\(|;|$)", line).group(1)
 
 
+@pytest.mark.opencl
 def test_device_by_index_and_by_name(rendered, device_lines):
     default = exr_planes(rendered / "out.exr")
     by_index = _render_with_device(rendered, "0")
@@ -361,6 +369,7 @@ def test_device_by_index_and_by_name(rendered, device_lines):
             np.testing.assert_array_equal(planes["Z"], default["Z"])
 
 
+@pytest.mark.opencl
 def test_device_by_kind(rendered, device_lines):
     """`fractalc devices` prints each device's kind ([CPU], [GPU]); the README
     advertises `--device gpu`, so the kind selects a device too."""
@@ -371,6 +380,7 @@ def test_device_by_kind(rendered, device_lines):
 
 # ------------------------------------------------------------------- precision
 
+@pytest.mark.opencl
 def test_precision_double_is_nearly_float(rendered, device_lines):
     if "double: no" in device_lines[0]:
         pytest.skip("the device has no double precision")
@@ -390,6 +400,7 @@ def test_precision_double_is_nearly_float(rendered, device_lines):
     assert not np.array_equal(double["Z"], single["Z"])
 
 
+@pytest.mark.opencl
 def test_precision_double_metadata(rendered, device_lines):
     if "double: no" in device_lines[0]:
         pytest.skip("the device has no double precision")
@@ -453,6 +464,7 @@ class _FailingOutput:
         return "No space left on device"
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("failure", ["disk full", "interrupt"])
 @pytest.mark.parametrize("name", ["out.exr", "out.png"])
 def test_a_failed_write_keeps_the_existing_file(tmp_path, monkeypatch, failure, name):

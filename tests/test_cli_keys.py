@@ -40,6 +40,7 @@ def metadata(path) -> dict:
     return {a.name.removeprefix("fractalc:"): a.value for a in spec.extra_attribs if a.name.startswith("fractalc:")}
 
 
+@pytest.mark.opencl
 def test_render_takes_render_and_camera_keys(scene_file, tmp_path):
     out = tmp_path / "out.exr"
     assert main(["render", str(scene_file), "-o", str(out), "-q", "--render", "ao=0.5", "--render",
@@ -52,6 +53,7 @@ def test_render_takes_render_and_camera_keys(scene_file, tmp_path):
     assert found["camera.target"] == "0 0 0"      # keys not given stay the file's
 
 
+@pytest.mark.opencl
 def test_keys_change_the_picture(scene_file, tmp_path):
     plain, narrow = tmp_path / "plain.exr", tmp_path / "narrow.exr"
     assert main(["render", str(scene_file), "-o", str(plain), "-q"]) == 0
@@ -99,6 +101,7 @@ def test_an_unknown_param_is_a_command_line_mistake(tmp_path, capsys, command):
     assert "--set x=1: the scene has no param 'x' (its params: power)" in capsys.readouterr().err
 
 
+@pytest.mark.opencl
 def test_animate_frames_take_the_keys(scene_file, tmp_path):
     pattern = str(tmp_path / "frames" / "f%02d.exr")
     assert main(["animate", str(scene_file), "-o", pattern, "--fps", "1", "-q"]) == 0

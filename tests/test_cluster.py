@@ -75,6 +75,7 @@ def builds_per_worker(client) -> dict:
     return client.run(lambda: __import__("fractalc.build").build.statistics.builds)
 
 
+@pytest.mark.opencl
 def test_frames_on_the_cluster_equal_local_frames_and_each_worker_builds_once(client, tmp_path):
     scene = fractalc.loads(SCENE, path="fly.frac")
     files, rendered = animate.render_frames(scene, str(tmp_path / "farm" / "f_%02d.exr"), FPS, seed=5,
@@ -93,6 +94,7 @@ def test_frames_on_the_cluster_equal_local_frames_and_each_worker_builds_once(cl
     assert_same_frames(files, local)
 
 
+@pytest.mark.opencl
 def test_a_still_assembled_from_row_tiles_equals_the_local_render(client):
     scene = fractalc.loads(SCENE)
     local = scene.render(seed=3, samples=4, aovs=["P"])
@@ -106,6 +108,7 @@ def test_a_still_assembled_from_row_tiles_equals_the_local_render(client):
     np.testing.assert_array_equal(scene.render(seed=3, samples=4, cluster=client).rgba, local.rgba)
 
 
+@pytest.mark.opencl
 def test_render_on_a_cluster_from_the_command_line_equals_the_local_render(client, tmp_path):
     (tmp_path / "fly.frac").write_text(SCENE)
     farmed = fractalc_cli("render", "fly.frac", "-o", "farm.exr", "--samples", 4,
@@ -118,6 +121,7 @@ def test_render_on_a_cluster_from_the_command_line_equals_the_local_render(clien
     np.testing.assert_array_equal(pixels(tmp_path / "farm.exr"), pixels(tmp_path / "local.exr"))
 
 
+@pytest.mark.opencl
 def test_a_kernel_build_failure_on_the_workers_is_an_error_not_a_hang(client, tmp_path):
     def break_builds():
         import fractalc.api
@@ -145,6 +149,7 @@ def test_a_kernel_build_failure_on_the_workers_is_an_error_not_a_hang(client, tm
     assert not os.listdir(tmp_path / "cli")
 
 
+@pytest.mark.opencl
 def test_a_worker_killed_mid_job_has_its_frames_rendered_elsewhere_each_written_once(client, tmp_path,
                                                                                     monkeypatch):
     saved, killed = collections.Counter(), []
@@ -175,6 +180,7 @@ def test_a_worker_killed_mid_job_has_its_frames_rendered_elsewhere_each_written_
     client.wait_for_workers(2)
 
 
+@pytest.mark.opencl
 def test_a_local_cluster_closes_leaving_no_marker_of_a_crash():
     # build.py marks processes that use the driver until they exit
     # normally; Dask's worker processes skip atexit
@@ -186,6 +192,7 @@ def test_a_local_cluster_closes_leaving_no_marker_of_a_crash():
     assert not (cache_dir() / "building" / str(pid)).exists()
 
 
+@pytest.mark.opencl
 def test_without_cluster_options_dask_is_never_imported(tmp_path):
     (tmp_path / "fly.frac").write_text(SCENE)
     code = textwrap.dedent("""\

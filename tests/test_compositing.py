@@ -13,6 +13,8 @@ import fractalc
 from fractalc import run
 from fractalc.passes import DEFAULT_CHANNELS, PASSES
 
+pytestmark = pytest.mark.opencl
+
 W, H = 64, 48
 CAMERA = "camera { position: (0.3, 0.5, 4), target: (0, 0, 0), fov: 40 }"
 # a fixed hit threshold: the pixel-footprint one widens the silhouette by about a pixel

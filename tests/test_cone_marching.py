@@ -44,6 +44,7 @@ def kernel_source(scene, lanes: int, double: bool = False, **render_keys) -> str
     return emit(lower(checked), Target(lanes=lanes, double=double))
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("precision", ["float", "double"])
 def test_the_scalar_copy_of_the_estimate_agrees_with_the_per_ray_one(precision):
     scene = fractalc.loads(SCENE, precision=precision, lanes=8)
@@ -91,6 +92,7 @@ render { width: 48, height: 36, dither: 0, cone_marching: CONE }
 """
 
 
+@pytest.mark.opencl
 def test_the_cone_saves_camera_evaluations():
     scenes = {cone: fractalc.loads(BOUNDED.replace("CONE", cone), lanes=16) for cone in ("on", "off")}
     on, off = (count(scenes[cone]) for cone in ("on", "off"))

@@ -53,6 +53,7 @@ def sphere_tracing_steps(offset: float, distance: float, epsilon: float) -> int:
     raise AssertionError("the ray misses")
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("offset", [0.0, 0.6, 0.9])
 def test_a_spheres_camera_ray_takes_the_evaluations_sphere_tracing_predicts(offset):
     distance, epsilon = 4.0, 1e-3
@@ -65,6 +66,7 @@ def test_a_spheres_camera_ray_takes_the_evaluations_sphere_tracing_predicts(offs
     assert counts.total == predicted + 4 and counts.iterations == 0
 
 
+@pytest.mark.opencl
 def test_counts_are_the_same_from_run_to_run_and_agree_with_the_steps_channel():
     # without the cone, whose steps are each of its rays' but one
     # evaluation for all (tests/test_cone_marching.py)
@@ -84,6 +86,7 @@ def test_counts_are_the_same_from_run_to_run_and_agree_with_the_steps_channel():
     assert hits <= first.evaluations["ao"] < 5 * hits
 
 
+@pytest.mark.opencl
 def test_counts_are_of_rays_not_of_the_lanes_a_work_item_evaluates():
     # (without the cone, which marches a work-item's packet of rays as one)
     lit = LIT.replace("render {", "render { cone_marching: off,")
@@ -92,6 +95,7 @@ def test_counts_are_of_rays_not_of_the_lanes_a_work_item_evaluates():
     assert one.evaluations == many.evaluations
 
 
+@pytest.mark.opencl
 def test_ambient_occlusion_of_an_open_surface_takes_one_evaluation():
     # the farthest AO sample of a plane seen from above is open: the nearer
     # ones are not taken, and the occlusion is none
@@ -119,6 +123,7 @@ def shadow_steps(height: float, sine: float, threshold: float, reach: float, fac
     return steps
 
 
+@pytest.mark.opencl
 def test_a_shadow_ray_leaving_a_plane_takes_the_over_relaxed_steps():
     # one pixel looking down at the ground, the light 30 degrees above it
     scene = fractalc.loads("""
@@ -135,6 +140,7 @@ def test_a_shadow_ray_leaving_a_plane_takes_the_over_relaxed_steps():
     assert image.rgba[0, 0, 0] > 0.5       # lit
 
 
+@pytest.mark.opencl
 def test_formula_iterations_are_counted_for_the_rays_evaluated():
     counts = count(fractalc.loads(BULB))
     per_evaluation = counts.iterations / counts.total
@@ -152,6 +158,7 @@ def test_normal_kernels_hold_no_counting_code():
             assert "__constant scalar *params" in source
 
 
+@pytest.mark.opencl
 def test_path_traced_bounces_and_light_rays_count_as_reflections_and_shadows():
     """The path tracer's rays count under their purposes: its bounces as
     reflections, its rays toward lights and the sky as shadows; the camera's
@@ -164,6 +171,7 @@ def test_path_traced_bounces_and_light_rays_count_as_reflections_and_shadows():
     assert counts[1]["camera"] == counts[3]["camera"], counts
 
 
+@pytest.mark.opencl
 def test_every_evaluation_in_the_counting_build_is_counted():
     scene = fractalc.loads(LIT.replace("reflectivity: 0.5", "reflectivity: 0.5, transparency: 0.5"))
     from dataclasses import replace
@@ -180,6 +188,7 @@ def test_every_evaluation_in_the_counting_build_is_counted():
         assert "COUNT_EVALUATIONS(" in function, function.split("\n", 1)[0]
 
 
+@pytest.mark.opencl
 def test_bench_count_prints_and_writes_the_counts(tmp_path):
     scene_file = tmp_path / "scene.frac"
     scene_file.write_text(LIT)

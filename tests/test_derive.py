@@ -145,6 +145,7 @@ def test_a_library_call_has_no_derivative():
         derive.jacobian((shape,), P)
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("precision, tolerance", [("float", 2e-4), ("double", 1e-10)])
 @pytest.mark.parametrize("lanes", [1, 8])
 def test_the_derived_estimate_in_the_kernel_matches_its_float64_meaning(precision, tolerance, lanes):

@@ -7,6 +7,8 @@ import pytest
 import fractalc
 import reference as ref
 
+pytestmark = pytest.mark.opencl
+
 S = ref.shape
 POINTS = np.random.default_rng(20240521).uniform(-3, 3, (2000, 3))
 

@@ -75,6 +75,7 @@ def test_the_pages_hold_the_examples():
     assert len(blocks()) >= 50
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("page, text", blocks())
 def test_every_example_frames_its_subject(page, text):
     if not SCENE.search(text):

@@ -81,6 +81,7 @@ PLATFORMS = ("import json, os; from fractalc.devices import list_devices; platfo
              "list_devices()]; print(json.dumps([os.environ.get('OCL_ICD_VENDORS'), platforms]))")
 
 
+@pytest.mark.opencl
 @needs_intel
 def test_registered_drivers_reach_the_loader_and_the_switch_leaves_them_out(tmp_path):
     done = run_python(PLATFORMS, tmp_path)
@@ -131,6 +132,7 @@ def fractalc_command(args, tmp_path, **environment) -> subprocess.CompletedProce
 RENDER = ["render", "examples/primitives.frac", "--width", "32", "--height", "24", "-o"]
 
 
+@pytest.mark.opencl
 @needs_intel
 def test_a_pocl_that_cannot_build_here_is_reported_and_intel_renders(tmp_path):
     """pip's PoCL 3.0 on a Zen 5: the first command still works, `devices`
@@ -162,6 +164,7 @@ def pocl_builds_here() -> bool:
     return any(usable(d) for d in list_devices() if "PoCL" in d.driver_label)
 
 
+@pytest.mark.opencl
 @needs_intel
 def test_the_default_falls_to_the_next_driver_with_a_note(tmp_path):
     if not pocl_builds_here():
@@ -176,6 +179,7 @@ def test_the_default_falls_to_the_next_driver_with_a_note(tmp_path):
     assert again.returncode == 0 and "note:" not in again.stderr, "the verdict is remembered"
 
 
+@pytest.mark.opencl
 @needs_intel
 def test_no_driver_that_builds_is_one_line_with_the_fix(tmp_path):
     done = fractalc_command(RENDER + [str(tmp_path / "a.png")], tmp_path, **BROKEN_INTEL, **BROKEN_POCL)

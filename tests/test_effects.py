@@ -141,6 +141,7 @@ def _ao_corner_and_open(image):
     return p, hit, corner, open_
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("method", ["normal", "steps"])
 def test_ao_darkens_the_inner_corner_more_with_strength(method):
     scene = fractalc.loads(textwrap.dedent(AO_SCENE))
@@ -201,6 +202,7 @@ def _visibility(image):
     return (image.rgba[..., 0].astype(np.float64) - SHADED) / (LIT - SHADED), x
 
 
+@pytest.mark.opencl
 def test_an_occluder_darkens_the_floor_behind_it():
     without = render(_shadow_scene(plate=False))
     assert np.allclose(without.rgba[..., 0], LIT, atol=1e-5)
@@ -215,6 +217,7 @@ def test_an_occluder_darkens_the_floor_behind_it():
     assert np.allclose(none.rgba[..., 0], LIT, atol=1e-5)
 
 
+@pytest.mark.opencl
 def test_hard_shadow_edge_is_sharp_and_where_geometry_puts_it():
     visible, x = _visibility(render(_shadow_scene("hard")))
     half_pixel = 0.5 * 5.0 * SHADOW_CAMERA.pixel_angle
@@ -240,6 +243,7 @@ def _crossing(x, v, level):
     return x[i - 1] + (level - v[i - 1]) * (x[i] - x[i - 1]) / (v[i] - v[i - 1])
 
 
+@pytest.mark.opencl
 def test_soft_shadow_penumbra_widens_as_softness_falls():
     widths = {}
     for k in (8, 16, 32):
@@ -270,6 +274,7 @@ def _hollow_box_distance(p):
     return np.maximum(box, 0.75 - np.linalg.norm(p, axis=-1))
 
 
+@pytest.mark.opencl
 def test_soft_shadow_on_concave_surfaces_is_the_smallest_ratio_along_the_ray():
     """The penumbra on the hollow box is min_t k d(t) / t taken densely
     along each shadow ray (from the hit point lifted by twice the threshold,
@@ -336,6 +341,7 @@ def _ball_shadow(shadows: str, epsilon: float):
     return image.passes["shadow"][..., 0][floor].astype(np.float64), origins, passing
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("shadows", ["hard", "soft"])
 def test_a_shadow_ray_within_the_hit_threshold_of_a_surface_is_blocked(shadows):
     # with a threshold as wide as 0.1 the rays that pass the ball within it
@@ -350,6 +356,7 @@ def test_a_shadow_ray_within_the_hit_threshold_of_a_surface_is_blocked(shadows):
         assert np.all(shadow[passing > 1.05 * epsilon] == 0)
 
 
+@pytest.mark.opencl
 def test_a_soft_shadow_penumbra_reaches_past_the_occluder():
     # outside the ball the light is dimmed by min_t k d(t) / t over the ray
     # (from t = 2 thresholds, as the kernel starts it); the march's bound
@@ -386,6 +393,7 @@ def _ray_to_segment(origins, direction, a, b, reach=20.0, samples=4001):
     return np.linalg.norm(points - (a + along[..., None] * (b - a)), axis=-1).min(axis=-1)
 
 
+@pytest.mark.opencl
 def test_a_twisted_shape_shadows_only_the_floor_near_it():
     image = render(TWISTED_COLUMN, aovs=["P", "shadow"])
     position, shadow = image.passes["P"].astype(np.float64), image.passes["shadow"]
@@ -414,6 +422,7 @@ def _glow_scene(glow=""):
     """
 
 
+@pytest.mark.opencl
 def test_glow_lights_misses_by_their_closest_approach():
     strength, radius = 0.8, 0.3
     image = render(_glow_scene(f", glow: {{ color: (1, 0.5, 0.25), strength: {strength}, radius: {radius} }}"))
@@ -446,6 +455,7 @@ def test_glow_lights_misses_by_their_closest_approach():
     assert np.allclose(image.rgba[hit], faint.rgba[hit], atol=1e-6)
 
 
+@pytest.mark.opencl
 def test_glow_absent_or_zero_leaves_the_background():
     for glow in ("", ", glow: { color: (1, 0.5, 0.25), strength: 0 }"):
         image = render(_glow_scene(glow))
@@ -454,6 +464,7 @@ def test_glow_absent_or_zero_leaves_the_background():
         assert np.all(image.rgba[..., :3][miss] == np.float32(GLOW_BACKGROUND))
 
 
+@pytest.mark.opencl
 def test_glow_stays_visible_in_fog():
     """Glow and fog together: the halo must survive the fog (here thin: at
     the closest approach, about 5 away, it lets exp(-0.25) = 78% through)."""
@@ -481,6 +492,7 @@ def _fog_scene(fog=""):
     """
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("density", [0.1, 0.3])
 def test_fog_mixes_toward_its_colour_at_the_analytic_rate(density):
     clear = render(_fog_scene())
@@ -535,6 +547,7 @@ def _red(image):
     return (c[..., 0] - np.maximum(c[..., 1], c[..., 2])) > 0.1
 
 
+@pytest.mark.opencl
 def test_mirror_shows_the_sphere_where_geometry_puts_its_image():
     predicted, direct = _mirror_prediction()
     assert predicted.sum() > 40
@@ -552,6 +565,7 @@ def test_mirror_shows_the_sphere_where_geometry_puts_its_image():
     assert abs(flat.rgba[centre][0] - flat.rgba[centre][1]) < 1e-6     # grey floor there
 
 
+@pytest.mark.opencl
 def test_partial_reflectivity_mixes_surface_and_mirror_image():
     predicted, _ = _mirror_prediction()
     own = render(_mirror_scene(0)).rgba[..., :3]
@@ -587,6 +601,7 @@ def _edge_width(image, camera=FLAT_CAMERA):
     return partial / (2 * np.pi * radius)
 
 
+@pytest.mark.opencl
 def test_depth_of_field_blurs_out_of_focus_edges_by_the_circle_of_confusion():
     focus = 3.0
     widths = []
@@ -603,6 +618,7 @@ def test_depth_of_field_blurs_out_of_focus_edges_by_the_circle_of_confusion():
     assert widths[2] > 3 * widths[0]
 
 
+@pytest.mark.opencl
 def test_depth_of_field_keeps_the_focused_edge_sharp():
     pinhole = _edge_width(render(_flat_sphere(), samples=32))
     focused = _edge_width(render(_flat_sphere(f", aperture: 0.8, focus: {SILHOUETTE}"), samples=32))
@@ -611,6 +627,7 @@ def test_depth_of_field_keeps_the_focused_edge_sharp():
     assert blurred > 6 * focused
 
 
+@pytest.mark.opencl
 def test_sixteen_samples_cut_the_edge_error_at_least_fourfold():
     width, height = 128, 96
     camera = FLAT_CAMERA.sized(width, height)
@@ -685,6 +702,7 @@ def _classify(rgb):
                      [1, -1, 0], 9)
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("ior", [1.0, 1.5])
 def test_transparent_sphere_shows_the_refracted_wall(ior):
     x_wall, inside = _through_the_sphere(ior)
@@ -695,6 +713,7 @@ def test_transparent_sphere_shows_the_refracted_wall(ior):
     assert clear.sum() > 400 and agree > 0.97, agree
 
 
+@pytest.mark.opencl
 def test_ball_lens_inverts_left_and_right():
     """A glass ball (focal length n R / 2(n - 1) = 1.5 from its centre) makes
     an inverted image of the wall 4 behind it; without bending (ior 1) the
@@ -706,6 +725,7 @@ def test_ball_lens_inverts_left_and_right():
     assert bent[row, left_of_centre] == -1 and bent[row, right_of_centre] == 1
 
 
+@pytest.mark.opencl
 def test_what_is_behind_the_glass_changes_what_is_seen_through_it():
     _, inside = _through_the_sphere(1.5)
     first = render(_glass_scene()).rgba[..., :3]
@@ -734,6 +754,7 @@ def _glass_roof_scene(transparency, roof=True):
     """
 
 
+@pytest.mark.opencl
 def test_hard_shadows_pass_through_transparent_solids():
     """A solid of transparency T passes T of the light to the ground under
     it (straight through, no refraction); an opaque one none."""
@@ -751,6 +772,7 @@ def test_hard_shadows_pass_through_transparent_solids():
         assert np.allclose(seen, dark + transparency * (bright - dark), atol=1e-4), transparency
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("fractal", ["mandelbulb(power: 8, iterations: 12, bailout: 2)", "julia(iterations: 12)"])
 def test_glass_fractals_show_what_lies_behind_them_smoothly(fractal):
     """An escape-time fractal's estimate is about 0 inside, not a depth: a
@@ -786,6 +808,7 @@ def test_glass_fractals_show_what_lies_behind_them_smoothly(fractal):
     assert seed_change(glass) < seed_change(opaque)
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("direction", [(0, 0, -1), (0.8, 0, -1), (2, 0, -1), (1, 1.5, -1)])
 def test_a_glass_slab_is_counted_once_whatever_the_light_angle(direction):
     """A slab of transparency 0.8 (3 x 3 x 0.2, at height 2) under oblique
@@ -812,6 +835,7 @@ def test_a_glass_slab_is_counted_once_whatever_the_light_angle(direction):
 
 # ------------------------------------------------------- effects together
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("scene", ["mirror", "glass"])
 def test_fog_covers_what_mirrors_and_glass_show(scene):
     """Fog mixes a pixel's colour toward the fog colour by its ray distance t.
@@ -833,6 +857,7 @@ def test_fog_covers_what_mirrors_and_glass_show(scene):
     assert short.max() < 1e-3, f"fog missing on {(short > 1e-3).mean():.0%} of the {scene}, up to {short.max():.2f}"
 
 
+@pytest.mark.opencl
 def test_fog_lies_along_the_bounce_too():
     """A mirror's reflection is fogged over both legs: where the bounce hits
     the sphere the fog fraction is 1 - exp(-density (t1 + t2)), t1 to the
@@ -867,6 +892,7 @@ DITHER_SCENE = f"""
 """
 
 
+@pytest.mark.opencl
 def test_dithering_is_deterministic_per_seed():
     scene = fractalc.loads(textwrap.dedent(DITHER_SCENE))
     a, b = scene.render(width=W, height=H, seed=5), scene.render(width=W, height=H, seed=5)
@@ -893,6 +919,7 @@ def _banding(steps, height, width):
     return jump, np.abs(profile - trend).max()
 
 
+@pytest.mark.opencl
 def test_dithering_reduces_banding():
     width, height = 128, 96
     scene = fractalc.loads(textwrap.dedent(DITHER_SCENE))
@@ -913,6 +940,7 @@ def test_dithering_reduces_banding():
 
 # ------------------------------------------------------------------- epsilon
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("epsilon", ["pixel", "1e-3", "0.05"])
 def test_hit_threshold_bounds_the_depth_error(epsilon):
     """Sphere tracing stops once the distance falls below the threshold, so
@@ -946,6 +974,7 @@ def test_hit_threshold_bounds_the_depth_error(epsilon):
         assert 0.5 < ratio < 2          # a number: the same at any distance
 
 
+@pytest.mark.opencl
 def test_overrelaxed_marching_finds_the_same_surface_in_fewer_steps():
     """`overrelax: w` steps w * d while successive unbounding spheres overlap
     (Keinert et al. 2014) and falls back to plain steps when they do not:
@@ -967,6 +996,7 @@ def test_overrelaxed_marching_finds_the_same_surface_in_fewer_steps():
 
 # ------------------------------------------------------------------- slicing
 
+@pytest.mark.opencl
 def test_slice_cut_face_has_the_plane_normal_and_depth():
     camera = Camera((1.0, -4.0, 1.5), (0, 0, 0), fov=40)
     normal, offset = np.array([0.3, -1.0, 0.2]), 0.2

@@ -229,6 +229,7 @@ HARD_POINTS = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, -1], 
                         [0, -1e6, 3], [1e18, 1e18, 1e18], [1e-30, 0, 0], [4 / 3 ** 0.5] * 3], dtype=float)
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("text", [HYBRID, QUATERNION], ids=["hybrid", "quaternion"])
 @pytest.mark.parametrize("precision, tolerance", [("float", 1e-3), ("double", 1e-9)])
 def test_kernel_matches_the_float64_meaning_and_is_finite_at_hard_cases(text, precision, tolerance):
@@ -245,6 +246,7 @@ def test_kernel_matches_the_float64_meaning_and_is_finite_at_hard_cases(text, pr
     assert hard[7] > 1e3 and hard[9] > 1e3      # far away, the estimate says so
 
 
+@pytest.mark.opencl
 def test_formula_arguments_are_params_without_a_rebuild():
     text = ("param s = 2 in [1.5, 3]\n" + f"# {np.random.default_rng().integers(1 << 40)}\n"
             "camera { position: (0, -14, 6), target: (0, 0, 0) }\n"
@@ -258,6 +260,7 @@ def test_formula_arguments_are_params_without_a_rebuild():
     assert not np.array_equal(first.depth, second.depth)
 
 
+@pytest.mark.opencl
 def test_a_files_formula_replaces_the_librarys():
     text = "formula amazing_box() {\n    z = 3 * z + c\n}\nscene fractal(amazing_box(), iterations: 2)"
     scene = fractalc.loads(text)
@@ -380,6 +383,7 @@ def test_a_formula_that_gives_its_own_estimate_gets_no_note_of_the_kind():
     assert fractalc.loads(text).checked.shape.estimate_reason is None
 
 
+@pytest.mark.opencl
 def test_an_underivable_step_is_allowed_with_the_formulas_own_estimate():
     text = ("formula cells() {\n    z = (z - floor(z)) * 2 + c\n    final distance = length(z) - 1\n}\n"
             "scene fractal(cells(), iterations: 1)")
@@ -405,6 +409,7 @@ def test_a_box_fold_with_a_limit_per_axis_keeps_the_scalar_derivative():
                                rtol=1e-12)
 
 
+@pytest.mark.opencl
 def test_step_scales_the_estimate_to_its_safe_factor(tmp_path):
     """`step: F` multiplies the estimate (check --de's safe step factor for a
     formula that oversteps); outside (0, 1] it is a located error."""
@@ -416,6 +421,7 @@ def test_step_scales_the_estimate_to_its_safe_factor(tmp_path):
     assert "'step' of 'fractal' must be at most 1, not 1.5" in _error(text.format(step=", step: 1.5"))
 
 
+@pytest.mark.opencl
 def test_an_estimate_where_z_does_not_move_with_the_point_is_zero_not_infinite():
     """At the origin z * z.x has a zero Jacobian (Julia mode: c does not
     move either): 0.5 r^2 ln r / 0 would be -inf; the estimate is 0 there

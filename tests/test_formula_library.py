@@ -242,6 +242,7 @@ def relative(a, b):
 
 # ---------------------------------------------------------------- the tests
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("precision", ["float", "double"])
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_compiled_estimate_matches_the_numpy_reference(name, precision):
@@ -310,6 +311,7 @@ def hard_points(case: Case) -> np.ndarray:
                      1e6 * diagonal, [-1e6, 0, 0], [0, 0, 1e6]])
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("precision", ["float", "double"])
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_hard_cases_are_finite(name, precision):

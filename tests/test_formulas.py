@@ -142,6 +142,7 @@ def _numpy_box(z):
 
 
 # p99 measured 4.4e-6 (PoCL) and 5.5e-6 (Intel's runtime) in float, 6.3e-15 in double
+@pytest.mark.opencl
 @pytest.mark.parametrize("precision, tolerance", [("float", 2e-5), ("double", 1e-9)])
 def test_a_hybrid_estimate_in_the_kernel_matches_its_float64_meaning(precision, tolerance):
     estimate = orbit(HYBRID).distance

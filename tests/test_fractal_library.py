@@ -15,6 +15,8 @@ from fractalc.emit import _library_text, double_literals, function_source
 from fractalc.fractals import orbit
 from fractalc.stdlib import library
 
+pytestmark = pytest.mark.opencl
+
 LANES = (1, 8)
 PRECISIONS = ("float", "double")
 # The 99th percentile of the relative error a fractal's estimate may have:

@@ -176,6 +176,7 @@ def _region(name, kwargs, count=10_000, seed=20240607):
     return ball(count, min(bound_radius(name, **kwargs), 20.0), seed)
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("precision", PRECISIONS)
 @pytest.mark.parametrize("name", FRACTALS)
 def test_default_fractal_matches_reference(name, precision, driver):
@@ -241,6 +242,7 @@ def _check_against_reference(name, argument, value, distance, precision, label):
 @pytest.mark.parametrize("precision", PRECISIONS)
 @pytest.mark.parametrize("name, argument, values", PARAM_CASES,
                          ids=[f"{c[0]}-{c[1]}" for c in PARAM_CASES])
+@pytest.mark.opencl
 def test_param_driven_fractal_matches_reference(name, argument, values, precision):
     in_file, set_later, given_to_loads = values
     text = param_scene_text(name, argument, in_file)
@@ -271,6 +273,7 @@ def test_param_values_outside_the_valid_values_are_check_errors(call, bad):
         fractalc.loads(text, params={"v": bad})
 
 
+@pytest.mark.opencl
 def test_a_rejected_param_value_leaves_the_scene_unchanged():
     # set_params stores each value before checking the values that depend on
     # it: after the SceneError the scene renders with the rejected value
@@ -335,6 +338,7 @@ def _param_scene_for(name, kwargs, precision):
     return s
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("precision", PRECISIONS)
 @pytest.mark.parametrize("name, kwargs", HARD, ids=[f"{n}-{k}" for n, k in HARD])
 def test_hard_cases_are_finite_with_the_right_sign(name, kwargs, precision):
@@ -381,6 +385,7 @@ BOUND_SETTINGS = [("mandelbulb", {}), ("mandelbulb", dict(power=3.0)), ("julia",
                   ("mandelbox", dict(fold_limit=0.5)), ("menger", {}), ("sierpinski", {})]
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("precision", PRECISIONS)
 @pytest.mark.parametrize("name, kwargs", BOUND_SETTINGS, ids=[f"{n}-{k}" for n, k in BOUND_SETTINGS])
 def test_outside_the_bound_is_the_bounding_sphere_distance(name, kwargs, precision):
@@ -414,6 +419,7 @@ TRANSFORM_CASES = [
 ]
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("name", ["mandelbulb", "mandelbox"])
 @pytest.mark.parametrize("transform, local, factor", TRANSFORM_CASES, ids=[c[0] for c in TRANSFORM_CASES])
 def test_the_bound_moves_and_scales_with_the_shape(name, transform, local, factor):
@@ -438,6 +444,7 @@ def _to_world(local, points):
     return (points - b) @ np.linalg.inv(local(np.eye(3)) - b)
 
 
+@pytest.mark.opencl
 def test_a_scale_param_moves_the_bound_without_rebuilding():
     s = scene("param k = 2 in [0.1, 10]\nscene mandelbulb().scale(k).translate((1, 0, 0))")
     s.set_params({"k": 2})
@@ -503,18 +510,21 @@ def _check_bounded_structure(source, names):
     assert sorted(found) == sorted(names), f"fractal loops {found}, expected {names}"
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("precision", PRECISIONS)
 @pytest.mark.parametrize("name", FRACTALS)
 def test_the_fractal_is_evaluated_only_inside_the_bound_block(name, precision):
     _check_bounded_structure(scene(f"scene {name}()", precision).kernel_source(), [name])
 
 
+@pytest.mark.opencl
 def test_each_fractal_of_a_scene_gets_its_own_bound_block():
     text = ("param k = 1 in [0.5, 2]\n"
             "scene union(mandelbulb().scale(k), menger(2).translate((3, 0, 0)), julia().rotate((0, 0, 1), 30))")
     _check_bounded_structure(scene(text).kernel_source(), ["mandelbulb", "menger", "julia"])
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("name, level", [("menger", 2), ("menger", 3), ("sierpinski", 2), ("sierpinski", 4)])
 def test_bounded_estimate_never_exceeds_the_exact_distance(name, level):
     # Where the reference is a valid bound (the exact solids): neither the
@@ -601,6 +611,7 @@ def reference_depth(name):
                         TRACE["epsilon"], TRACE["max_steps"], camera["max_distance"])
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("name", FRACTALS)
 def test_depth_map_matches_a_numpy_sphere_tracer(name, driver):
     image = scene(camera_scene(f"scene {name}()", CAMERAS[name]), device=driver).render(width=W, height=H)
@@ -677,6 +688,7 @@ def mandelbulb_trap(points, kind, power=8.0, iterations=12, bailout=2.0):
     return trap[:, ("origin", "x", "y", "z").index(kind)]
 
 
+@pytest.mark.opencl
 def test_orbit_trap_colour_lies_between_near_and_far_and_follows_the_trap():
     s = trap_scene("mandelbulb()")
     s.set_params({**_colour_params(NEAR, FAR), "ts": 0.8})    # origin traps are 0.6 .. 1.1 here
@@ -700,6 +712,7 @@ def test_orbit_trap_colour_lies_between_near_and_far_and_follows_the_trap():
     assert np.median(difference) < 1e-2 and np.percentile(difference, 90) < 0.1
 
 
+@pytest.mark.opencl
 def test_orbit_trap_defaults_spread_the_colour_over_the_fractal():
     # trap and scale left to their defaults: the nearest plane's distance,
     # t = 1 + ln(trap) / 5 (lower.TRAP_DECADES). The default was once the
@@ -725,6 +738,7 @@ def test_orbit_trap_defaults_spread_the_colour_over_the_fractal():
             assert np.median(difference) < 1e-2 and np.percentile(difference, 90) < 0.1
 
 
+@pytest.mark.opencl
 def test_orbit_trap_colours_and_scale_change_the_image_as_predicted_without_rebuilding():
     s = trap_scene("mandelbulb()")
     s.set_params({**_colour_params(NEAR, FAR), "ts": 0.8})
@@ -745,6 +759,7 @@ def test_orbit_trap_colours_and_scale_change_the_image_as_predicted_without_rebu
     assert builds() == before
 
 
+@pytest.mark.opencl
 def test_trap_kinds_give_different_images():
     renders = {}
     for kind in ("origin", "x", "y", "z", "planes"):
@@ -763,6 +778,7 @@ def test_trap_kinds_give_different_images():
         assert (weight["planes"] <= weight[axis] + 1e-4).all()
 
 
+@pytest.mark.opencl
 def test_orbit_trap_on_a_shape_without_an_orbit_uses_near():
     s = trap_scene("sphere(0.8)", colours=("(0.9, 0.3, 0.1)", "(0.1, 0.2, 0.7)"), scale="3")
     hit, albedo = _albedo(s.render(width=32, height=24))
@@ -808,6 +824,7 @@ def test_orbit_trap_scale_param_must_stay_positive():
 F_LITERAL = re.compile(r"(?<![\w.])(\d+\.\d*|\.\d+|\d+(?=[eE]))([eE][+-]?\d+)?[fF]\b")
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("name", FRACTALS)
 def test_double_kernel_has_no_float_literals(name):
     text = f"param k = 1 in [0.5, 2]\nscene {name}().scale(k).color(orbit_trap())"
@@ -827,6 +844,7 @@ def no_double(monkeypatch):
     return device
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("how", ["loads", "render block"])
 def test_double_on_a_device_without_double_is_a_clear_render_error(no_double, how):
     if how == "loads":
@@ -844,6 +862,7 @@ def test_double_on_a_device_without_double_is_a_clear_render_error(no_double, ho
 
 # ---------------------------------------------------------------- bugs found
 
+@pytest.mark.opencl
 def test_an_empty_julia_slice_renders_nothing():
     # |slice| >= R: the slice misses the set (julia.cl: the DE is > 0
     # everywhere) and julia_bound_radius is 0. The bounding sphere of radius
@@ -871,6 +890,7 @@ def test_mandelbox_radius_order_is_checked_for_param_values():
         fractalc.loads(text, params={"fr": 0.5})
 
 
+@pytest.mark.opencl
 def test_the_bounding_sphere_never_shows_in_the_image():
     # Beyond 1.1 R the scene's distance is the bounding sphere's, |p| - R, and
     # nothing stops that value from falling below the hit threshold when the

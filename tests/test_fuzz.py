@@ -67,6 +67,7 @@ def test_generated_and_mutated_scenes_check_or_fail_at_a_place():
     assert outcomes.count("checked") >= 50 and outcomes.count("rejected") >= 50, outcomes
 
 
+@pytest.mark.opencl
 def test_scenes_that_check_render_finite_images():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")     # the OpenCL compiler's chatter

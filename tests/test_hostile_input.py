@@ -57,6 +57,7 @@ def _params_as(value: str) -> str:
         "render { max_distance: 400 }"]).replace("{a}", value)
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("precision", ["float", "double"])
 def test_params_in_every_argument_position_build_and_match_constants(precision):
     """Item 1: a param where the kernel mixes it with per-ray values (a
@@ -92,6 +93,7 @@ def _sphere_distances(points) -> np.ndarray:
 POINTS = np.random.default_rng(11).uniform(-2.5, 2.5, (64, 3))
 
 
+@pytest.mark.opencl
 def test_flat_union_past_the_nesting_limit_builds():
     """Item 2: 300 shapes in one union (once more brackets than clang takes)."""
     scene = fractalc.loads(f"scene union({', '.join(_translated_spheres())})")
@@ -99,6 +101,7 @@ def test_flat_union_past_the_nesting_limit_builds():
     assert np.isfinite(scene.render(width=16, height=12).depth).any()
 
 
+@pytest.mark.opencl
 def test_smooth_union_of_many_shapes_folds_left_to_right():
     """Item 2: a smooth union stays ordered (LANGUAGE.md), however long."""
     k = 0.3
@@ -110,6 +113,7 @@ def test_smooth_union_of_many_shapes_folds_left_to_right():
     np.testing.assert_allclose(scene.distance(POINTS), expected, atol=1e-4)
 
 
+@pytest.mark.opencl
 def test_let_chain_of_unions_with_colours_builds():
     """Item 2: a let chain nests shapes through names, past the parser's
     limit on brackets; each part keeps its own colour."""
@@ -122,6 +126,7 @@ def test_let_chain_of_unions_with_colours_builds():
     assert np.isfinite(image.depth).any() and np.isfinite(image.rgba).all()
 
 
+@pytest.mark.opencl
 def test_long_chain_of_reverse_references_checks_and_renders():
     """Item 3: lets that each name the next one (defined later), with a
     param: no RecursionError in check or lowering (deeper than Python's
@@ -254,6 +259,7 @@ def test_python_values_out_of_range_raise_value_errors_naming_the_key():
     assert scene.params == {"x": 1.0}
 
 
+@pytest.mark.opencl
 def test_out_of_memory_is_one_line_with_exit_1(tmp_path, capsys, monkeypatch):
     """The host's image array not fitting in memory (numpy's MemoryError,
     simulated: a size the machine lacks is refused before by its estimate,
@@ -272,6 +278,7 @@ def test_out_of_memory_is_one_line_with_exit_1(tmp_path, capsys, monkeypatch):
     assert printed.startswith("fractalc: error: out of memory") and printed.count("\n") == 1
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("precision", ["float", "double"])
 def test_lights_bright_enough_to_overflow_give_finite_pixels(precision):
     text = "\n".join(["scene union(sphere(1), plane(offset: -1))",
@@ -296,6 +303,7 @@ FAR = np.array([[0.0, 0, 0], [0.3, -0.2, 0.5], [1.1, 0, 0], [-2, 3, 1], [50, -40
     "julia().scale(1e-30).twist(1.11)", "sphere().twist(3e38)", "box(1).bend(-1e30)",
     "intersect(box(0.5).scale(1e-30).twist(1e30).scale(1e29), sphere(1))",
 ])
+@pytest.mark.opencl
 def test_tiny_scales_far_offsets_and_huge_warp_rates_give_finite_distances(shape, precision):
     """Item 1 (fuzz finding 6): a moved point that would pass float's range
     is clamped, a warp's rate too; distances stay finite and images too."""
@@ -307,6 +315,7 @@ def test_tiny_scales_far_offsets_and_huge_warp_rates_give_finite_distances(shape
     assert ((image.depth >= 0) | (image.depth == np.inf)).all()
 
 
+@pytest.mark.opencl
 def test_clamping_a_far_point_keeps_the_estimate_a_lower_bound():
     """Item 1: a sphere 1.2e21 away in double: the clamped estimate (1e18
     at most) is finite and below the true distance; near it, exact."""
@@ -317,6 +326,7 @@ def test_clamping_a_far_point_keeps_the_estimate_a_lower_bound():
     assert d[1] == 2.0 ** 19 - 1
 
 
+@pytest.mark.opencl
 def test_epsilon_scale_beyond_its_limit_is_a_located_error(tmp_path, capsys):
     """Item 1 (fuzz finding 7): a threshold of 1e30 pixels gave NaN normals."""
     printed = _check_errors("scene sphere()\nrender { epsilon_scale: 1e30 }\n", tmp_path, capsys)
@@ -325,6 +335,7 @@ def test_epsilon_scale_beyond_its_limit_is_a_located_error(tmp_path, capsys):
     assert np.isfinite(image.normal).all() and np.isfinite(image.depth).any()
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("precision", ["float", "double"])
 def test_huge_glow_fog_and_background_colours_give_finite_pixels(precision):
     """Item 2: colours bounded only below sum past float's range."""
@@ -356,6 +367,7 @@ def test_many_unknown_names_get_few_suggestions(monkeypatch):
 
 # ---- the user's text in generated source and names -------------------------
 
+@pytest.mark.opencl
 def test_a_path_with_a_newline_stays_in_the_kernels_comment(tmp_path):
     """Item 5: the path is written into the kernel's header comment; a
     newline in it must not start a line of C (here: one turning the union
@@ -372,6 +384,7 @@ def test_a_path_with_a_newline_stays_in_the_kernels_comment(tmp_path):
     np.testing.assert_array_equal(scene.distance(points), plain.distance(points))
 
 
+@pytest.mark.opencl
 def test_generated_material_names_cannot_be_declared():
     """Item 6: `.color(...)` and the default material make materials of
     their own; a file's materials named like them must not replace them."""
@@ -390,6 +403,7 @@ def test_generated_material_names_cannot_be_declared():
     assert np.allclose(grey, grey[0], rtol=0.01)  # the default material: grey, not the file's green
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("normals", ["tetrahedral", "central", "forward"])
 def test_normals_stay_finite_deep_inside_a_far_plane(normals):
     """Estimates near float's largest (a point 3e38 inside a plane): the
@@ -402,6 +416,7 @@ def test_normals_stay_finite_deep_inside_a_far_plane(normals):
 @pytest.mark.parametrize("text, key", [("scene capsule((-0.6, 2.9, 1e30), (0, 0, 1))", "'a' of 'capsule'"),
                                        ("scene capsule(radius: 1e30)", "'radius' of 'capsule'"),
                                        ("scene torus(1e30)", "'major' of 'torus'")])
+@pytest.mark.opencl
 def test_shapes_whose_distance_squares_a_huge_size_are_refused_at_the_value(text, key):
     """A capsule end at 1e30 gave distance +inf everywhere (fuzz seed 5 case 3209)."""
     with pytest.raises(fractalc.SceneError, match=key):
@@ -549,6 +564,7 @@ def test_a_hybrid_past_its_steps_is_refused_where_it_passes_them():
 FORMULA_WITH = "formula f() {{\n    z = 2 * z + c\n    final distance = {}\n}}\nscene fractal(f(), iterations: 4, bound: 2)\n"
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("precision", ["float", "double"])
 @pytest.mark.parametrize("final", ["1e30 * length(z) * 1e30", "sqrt(-length(z))", "exp(1000 * length(z))"])
 def test_a_formulas_own_estimate_is_finite_everywhere(final, precision):
@@ -625,6 +641,7 @@ def _hostile_values(name: str, valid, none_means_default: bool):
     return values
 
 
+@pytest.mark.opencl
 def test_every_api_function_answers_wrong_arguments_in_words(tmp_path):
     import inspect
     failures = []
@@ -654,6 +671,7 @@ def test_every_api_function_answers_wrong_arguments_in_words(tmp_path):
     assert not failures, "\n".join(failures)
 
 
+@pytest.mark.opencl
 def test_api_examples_of_the_issue():
     """loads(bytes), loads(None), params=[1, 2], device=0 (an index, as
     --device 0), render(camera='x'), render(aovs=3), save(Path), 10**400."""
@@ -676,6 +694,7 @@ def test_api_examples_of_the_issue():
         assert (pathlib.Path(folder) / "x.exr").stat().st_size > 0
 
 
+@pytest.mark.opencl
 def test_one_device_spelled_two_ways_shares_one_context():
     """The default device and device='cpu' (here the same one): a program
     built for one spelling ran with the other's queue (INVALID_CONTEXT)."""
@@ -686,6 +705,7 @@ def test_one_device_spelled_two_ways_shares_one_context():
     np.testing.assert_array_equal(second.distance([[0.0, 0.0, 0.0]]), [-1.0])
 
 
+@pytest.mark.opencl
 def test_mesh_bounds_that_make_cells_degenerate_are_refused(tmp_path, capsys):
     """--bounds=-1e30,-1,-1,1e30,1,1 at resolution 8 wrote 'v nan ...'."""
     scene_file = tmp_path / "scene.frac"

@@ -116,6 +116,7 @@ def test_uniform_branches_are_if_else_and_per_ray_ones_compute_their_side_where_
     assert "cos(" in before and "sin(" in inside and "else" not in source
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("precision", ["float", "double"])
 @pytest.mark.parametrize("lanes", [1, 8])
 def test_a_fractal_loop_in_the_kernel_matches_its_numpy_iteration(precision, lanes):

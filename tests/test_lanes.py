@@ -59,11 +59,13 @@ class Probes:
         return lanes.run_probe(device_index, width, precisions)
 
 
+@pytest.mark.opencl
 def test_the_probe_passes_at_a_width_this_driver_runs(cpu, cache):
     passed = lanes.run_probe(cpu.index, 4, ("float", "double") if cpu.double else ("float",))
     assert isinstance(passed, lanes.ProbePassed) and 0 <= passed.native_error < 1e-2
 
 
+@pytest.mark.opencl
 def test_a_crashing_probe_falls_back_to_the_next_width_and_is_remembered(cpu, cache):
     probe = Probes({16: SEGFAULT, 8: SEGFAULT})
     choice = lanes.choose(cpu, probe=probe)
@@ -78,18 +80,21 @@ def test_a_crashing_probe_falls_back_to_the_next_width_and_is_remembered(cpu, ca
     assert "16 failed: the OpenCL compiler crashed (SIGSEGV)" in lanes.describe(lanes.choose(cpu, probe=again))
 
 
+@pytest.mark.opencl
 def test_a_hanging_probe_times_out_and_falls_back(cpu, cache):
     probe = Probes({16: HANG}, timeout=3.0)
     choice = lanes.choose(cpu, probe=probe)
     assert choice.lanes == 8 and choice.failures == ((16, "the OpenCL compiler took over 3 s"),)
 
 
+@pytest.mark.opencl
 def test_a_device_that_fails_at_every_width_is_a_clear_error(cpu, cache):
     probe = Probes({w: SEGFAULT for w in lanes.WIDTHS})
     with pytest.raises(RenderError, match="failed the lane probe at every width"):
         lanes.choose(cpu, probe=probe)
 
 
+@pytest.mark.opencl
 def test_the_probe_checks_double_too_where_the_device_has_it(cpu, cache):
     asked = []
 
@@ -104,6 +109,7 @@ DOUBLE_FAILS = [sys.executable, "-c", "print('{\"precision\": \"float\", \"error
                 "print('{\"precision\": \"double\", \"error\": \"sqrt gave 0.5 for 0.7\"}')"]
 
 
+@pytest.mark.opencl
 def test_a_failure_in_double_alone_fails_the_width(cpu, cache):
     failure = lanes.run_probe(cpu.index, 16, ("float", "double"), command=DOUBLE_FAILS)
     assert failure == lanes.ProbeFailure("sqrt gave 0.5 for 0.7 (double)")
@@ -135,6 +141,7 @@ def test_native_functions_count_as_exact_only_within_a_few_ulps():
     assert not lanes.LaneChoice(16, "set by --lanes").native_exact, "unmeasured counts as inexact"
 
 
+@pytest.mark.opencl
 def test_overrides_and_gpus_need_no_probe(cpu, cache, monkeypatch):
     never = Probes({})
     assert lanes.choose(cpu, override=2, probe=never).lanes == 2
@@ -162,6 +169,7 @@ def test_the_command_line_checks_lanes_before_any_work(capsys, monkeypatch):
     assert not Path("never.png").exists()
 
 
+@pytest.mark.opencl
 def test_the_lane_override_reaches_the_kernel(monkeypatch):
     scene = fractalc.loads("scene sphere(1)", lanes=4)
     assert "#define LANES 4" in scene.kernel_source()
@@ -172,6 +180,7 @@ def test_the_lane_override_reaches_the_kernel(monkeypatch):
         fractalc.loads("scene sphere(1)", lanes=3)
 
 
+@pytest.mark.opencl
 def test_devices_shows_the_rays_per_work_item(capsys, monkeypatch):
     monkeypatch.setenv(lanes.ENVIRONMENT, "8")
     assert cli.main(["devices"]) == 0
@@ -217,6 +226,7 @@ def test_a_dead_marker_waits_while_another_process_builds(tmp_path):
     assert sorted(p.name for p in (cache / "building").iterdir()) == sorted([dead.stdout.strip(), str(os.getpid())])
 
 
+@pytest.mark.opencl
 def test_a_program_without_its_kernels_is_cleared_and_built_again(monkeypatch, tmp_path):
     """As PoCL answers after a crash left a half-built cache entry: the
     program builds but has no `render` kernel."""
@@ -259,6 +269,7 @@ def test_the_command_passes_on_its_child_exit_code(monkeypatch):
 
 # ---- quiet builds ------------------------------------------------------------------
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("verbose", [False, True])
 def test_compiler_chatter_reaches_the_terminal_only_when_verbose(verbose, monkeypatch, capfd):
     import pyopencl as cl
@@ -275,6 +286,7 @@ def test_compiler_chatter_reaches_the_terminal_only_when_verbose(verbose, monkey
     assert any(issubclass(w.category, cl.CompilerWarning) for w in caught) == verbose
 
 
+@pytest.mark.opencl
 def test_a_failed_build_names_the_saved_source_and_log(monkeypatch):
     device = fractalc.loads("scene sphere(1)").device
     with pytest.raises(RenderError) as error:
@@ -285,6 +297,7 @@ def test_a_failed_build_names_the_saved_source_and_log(monkeypatch):
     assert Path(log).read_text().strip()
 
 
+@pytest.mark.opencl
 def test_first_render_on_a_cold_machine(tmp_path):
     """The README's first command with every cache empty: the lane probe
     runs, the kernel is compiled from nothing, and the terminal sees one

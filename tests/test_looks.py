@@ -43,6 +43,7 @@ def corner(path) -> np.ndarray:
     ({"tonemap": "reinhard", "exposure": 3}, 1.6 / 2.6),              # no longer clipped
     ({"tonemap": "aces"}, 0.2 * (2.51 * 0.2 + 0.03) / (0.2 * (2.43 * 0.2 + 0.59) + 0.14)),
 ])
+@pytest.mark.opencl
 def test_png_shows_the_radiance_times_two_to_the_exposure_through_the_curve(tmp_path, keys, display):
     scene = fractalc.loads(SCENE)
     image = scene.render(**keys)
@@ -67,6 +68,7 @@ def test_tone_curves_keep_order_and_roll_highlights_off():
     assert np.all(aces[radiance > 7.25] == 1.0) and np.all(aces[radiance < 7.24] < 1.0)
 
 
+@pytest.mark.opencl
 def test_floors_under_the_example_lights_keep_their_shading(tmp_path):
     # examples/primitives.frac: its floor (albedo 0.75) under a sun and a
     # blue point light, ambient 0.25: linear values up to 1.1. Clipped at
@@ -98,6 +100,7 @@ def test_bad_tone_keys_are_errors_at_the_value(entry, message):
     assert ":2:" in str(caught.value)
 
 
+@pytest.mark.opencl
 def test_exposure_and_tonemap_do_not_rebuild_the_kernel():
     scene = fractalc.loads(SCENE)
     scene.render()
@@ -141,6 +144,7 @@ def smoothstep(edge0, edge1, x):
     return t * t * (3 - 2 * t)
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("build", [{}, {"lanes": 1}, {"precision": "double"}])
 def test_a_spot_light_lights_its_cone_and_fades_across_its_falloff(build):
     image = fractalc.loads(SPOT.replace("INTEGRATOR", ""), **build).render(aovs=["P"])
@@ -154,6 +158,7 @@ def test_a_spot_light_lights_its_cone_and_fades_across_its_falloff(build):
                                    rtol=2e-4, atol=1e-6)
 
 
+@pytest.mark.opencl
 def test_the_path_tracer_lights_a_spot_s_cone_alike():
     image = fractalc.loads(SPOT.replace("INTEGRATOR", "integrator: path, bounces: 1,")).render(samples=4, aovs=["P"])
     strength, along = spot_light_at(image.passes["P"].astype(float))
@@ -189,6 +194,7 @@ def albedo_of(coloring: str, **build):
     return image.passes["albedo"].astype(float), np.isfinite(image.depth) & ~ball, ball
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("build", [{}, {"precision": "double"}])
 def test_a_cosine_palette_follows_the_orbit_trap(build):
     # orbit_trap from black to white shows t = trap * scale itself (below 1)
@@ -202,6 +208,7 @@ def test_a_cosine_palette_follows_the_orbit_trap(build):
     np.testing.assert_allclose(colour[fractal], np.maximum(expected, 0), atol=2e-5)
 
 
+@pytest.mark.opencl
 def test_a_palette_on_a_plain_shape_is_its_colour_at_zero_and_follows_params():
     coloring = "palette(d: (shift, 0.33, 0.67))"
     albedo, _, ball = albedo_of(coloring)
@@ -216,6 +223,7 @@ def test_a_palette_on_a_plain_shape_is_its_colour_at_zero_and_follows_params():
     assert np.abs(red - 0.5).max() < 1e-6 and len(scene._programs) == built
 
 
+@pytest.mark.opencl
 def test_the_viewer_shows_the_exposure_and_tone_curve_as_a_png_would(tmp_path, monkeypatch):
     import io
     monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
@@ -229,6 +237,7 @@ def test_the_viewer_shows_the_exposure_and_tone_curve_as_a_png_would(tmp_path, m
     assert viewer.pixels()[0, 0, 0] == round(srgb(0.8 / 1.8) * 255)
 
 
+@pytest.mark.opencl
 def test_the_direct_renderer_shows_the_environment_where_rays_miss_and_in_mirrors():
     from fractalc import run
     sky = {"zenith": (0.2, 0.4, 1.0), "horizon": (0.9, 0.8, 0.7), "ground": (0.1, 0.3, 0.05)}
@@ -266,6 +275,7 @@ render {{ width: 32, height: 24, dither: 0, epsilon: 1e-5, {keys} }}
 ALBEDO = np.array([0.7, 0.5, 0.3])
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("build", [{}, {"lanes": 1, "precision": "double"}])   # (a GPU's lanes)
 def test_a_uniform_environment_lights_a_diffuse_sphere_with_its_radiance(build):
     # irradiance pi L from every normal: the colour is albedo * L times the
@@ -284,6 +294,7 @@ def cosine_integral(normals, directions, solid_angle, radiance):
     return np.maximum(normals @ directions.T, 0) @ (radiance * solid_angle[:, None]) / math.pi
 
 
+@pytest.mark.opencl
 def test_a_sky_gradient_lights_a_diffuse_sphere_as_quadrature_says():
     from test_pathtrace import sky_irradiance
     sky = {"zenith": (0.2, 0.4, 1.0), "horizon": (0.9, 0.8, 0.7), "ground": (0.1, 0.3, 0.05)}
@@ -298,6 +309,7 @@ def test_a_sky_gradient_lights_a_diffuse_sphere_as_quadrature_says():
     assert covered.sum() > 200 and np.abs(relative).max() < 0.03 and np.abs(relative).mean() < 0.01
 
 
+@pytest.mark.opencl
 def test_an_environment_map_lights_a_diffuse_sphere_as_quadrature_over_its_texels_says(tmp_path):
     from test_pathtrace import write_map
     # a smooth sky with a broad bright patch, as a 128 x 64 image
@@ -324,6 +336,7 @@ def test_an_environment_map_lights_a_diffuse_sphere_as_quadrature_over_its_texel
     assert brightest @ np.array([0.6, -0.48, 0.64]) > 0.8
 
 
+@pytest.mark.opencl
 def test_an_mp4_made_from_exr_frames_shows_them_as_their_pngs(tmp_path):
     from fractalc.animate import _display_pixels
     image = fractalc.loads(SCENE).render(exposure=1.5, tonemap="aces")
@@ -351,6 +364,7 @@ def _numpy_bulb_steps(points, iterations=8, bailout=2.0):
     return steps
 
 
+@pytest.mark.opencl
 def test_colour_by_iteration_count_and_by_position():
     """trap: iterations counts the orbit's steps (the same loop), radius and
     height read the point: black-to-white ramps show t itself."""
@@ -381,6 +395,7 @@ def scene_with_map(tmp_path, entry: str):
     return path
 
 
+@pytest.mark.opencl
 def test_a_scene_file_names_its_environment_map_relative_to_its_folder(tmp_path, monkeypatch):
     from test_pathtrace import write_map
     path = scene_with_map(tmp_path, 'map: "maps/sky.exr", intensity: 2')

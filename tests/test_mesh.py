@@ -39,27 +39,32 @@ def sphere_mesh():
     return fractalc.loads(SPHERE).mesh(resolution=128)
 
 
+@pytest.mark.opencl
 def test_sphere_vertices_lie_on_the_unit_sphere(sphere_mesh):
     radii = np.linalg.norm(sphere_mesh.vertices, axis=1)
     assert np.abs(radii - 1).max() < 0.01
 
 
+@pytest.mark.opencl
 def test_sphere_mesh_is_watertight_and_consistently_wound(sphere_mesh):
     assert np.all(edge_uses(sphere_mesh.faces) == 2)
     assert directed_edges_unique(sphere_mesh.faces)
 
 
+@pytest.mark.opencl
 def test_sphere_volume_within_one_percent(sphere_mesh):
     # positive: faces wind counter-clockwise seen from outside
     assert sphere_mesh.volume() == pytest.approx(4 / 3 * np.pi, rel=0.01)
 
 
+@pytest.mark.opencl
 def test_normals_are_the_outward_unit_gradient(sphere_mesh):
     radial = sphere_mesh.vertices / np.linalg.norm(sphere_mesh.vertices, axis=1, keepdims=True)
     assert np.allclose(np.linalg.norm(sphere_mesh.normals, axis=1), 1, atol=1e-5)
     assert np.einsum("ij,ij->i", sphere_mesh.normals, radial).min() > 0.999
 
 
+@pytest.mark.opencl
 def test_menger_level_2_volume():
     # Level 2 keeps (20/27)^2 of the cube [-1,1]^3. Its smallest holes are
     # 2/9 wide: 128 cells over the bound's cube (side 2 sqrt(3) * 1.02) put
@@ -73,6 +78,7 @@ def test_menger_level_2_volume():
     assert np.all(edge_uses(mesh.faces) == 2)
 
 
+@pytest.mark.opencl
 def test_fractal_estimate_meshes_as_one_solid():
     # the Mandelbulb's estimate is positive at specks inside the solid: its
     # zero set alone would be a dust of small closed surfaces in there
@@ -100,6 +106,7 @@ def hollow_ball_mesh():
     return fractalc.loads(HOLLOW_BALL).mesh(resolution=64)
 
 
+@pytest.mark.opencl
 def test_shells_are_the_bodies_and_voids_with_their_volumes(hollow_ball_mesh):
     _, volumes = hollow_ball_mesh.shells()
     # sorted: the void (wound inwards: negative), the island, the loose ball, the hollow ball
@@ -107,6 +114,7 @@ def test_shells_are_the_bodies_and_voids_with_their_volumes(hollow_ball_mesh):
     assert np.sort(volumes) == pytest.approx(sorted(expected), rel=0.03)
 
 
+@pytest.mark.opencl
 def test_solid_keeps_the_largest_body_with_its_voids_filled(hollow_ball_mesh):
     solid, removed = hollow_ball_mesh.solid()
     assert (removed.kept, removed.voids, removed.others) == (1, 1, 2)
@@ -122,6 +130,7 @@ def test_solid_keeps_the_largest_body_with_its_voids_filled(hollow_ball_mesh):
                                                                                    keepdims=True)).min() > 0.99
 
 
+@pytest.mark.opencl
 def test_solid_with_a_minimum_volume_keeps_loose_bodies_but_not_those_inside_a_void(hollow_ball_mesh):
     # the island (0.113) is above the minimum too, but lies in the filled cavity
     solid, removed = hollow_ball_mesh.solid(min_volume=0.05)
@@ -130,6 +139,7 @@ def test_solid_with_a_minimum_volume_keeps_loose_bodies_but_not_those_inside_a_v
     assert removed.others_volume == pytest.approx(ball(0.3), rel=0.03)
 
 
+@pytest.mark.opencl
 def test_the_mandelbulb_meshes_to_one_solid():
     # its mesh holds many tiny voids and specks inside them (at 128 cells:
     # 348 surfaces, 333 of them voids), which slicers flag
@@ -143,6 +153,7 @@ def test_the_mandelbulb_meshes_to_one_solid():
     assert np.all(edge_uses(solid.faces) == 2)
 
 
+@pytest.mark.opencl
 def test_cli_writes_stl_as_one_solid_and_other_formats_whole(tmp_path, capsys):
     scene = tmp_path / "s.frac"
     scene.write_text(HOLLOW_BALL)
@@ -160,6 +171,7 @@ def test_cli_writes_stl_as_one_solid_and_other_formats_whole(tmp_path, capsys):
     assert "--min-volume is for --shells solid" in capsys.readouterr().err
 
 
+@pytest.mark.opencl
 def test_slabs_weld_into_the_same_mesh_as_one_block():
     # one z-plane per kernel call against all planes in one: the seams weld,
     # so the meshes are the same vertex for vertex
@@ -174,6 +186,7 @@ def test_slabs_weld_into_the_same_mesh_as_one_block():
     assert np.all(edge_uses(sliced.faces) == 2)
 
 
+@pytest.mark.opencl
 def test_points_per_kernel_call_are_bounded(monkeypatch):
     # the memory bound: no call evaluates more than a chunk (one z-plane
     # when a plane is larger), whatever the resolution
@@ -189,6 +202,7 @@ def test_points_per_kernel_call_are_bounded(monkeypatch):
     assert grid.counts == (1025, 1025, 1025)
 
 
+@pytest.mark.opencl
 def test_surface_cut_by_the_bounds_is_capped_on_them():
     # the top half of the cube [-1,1]^3: the cut at z = 0 is closed by a cap in that plane
     mesh = fractalc.loads("scene box(2)\n").mesh(resolution=40, bounds=(-2, -2, 0, 2, 2, 2))
@@ -205,6 +219,7 @@ def test_unbounded_scene_needs_bounds():
         scene.mesh(resolution=16, bounds=(0, 0, 0, 1, -1, 1))
 
 
+@pytest.mark.opencl
 def test_no_surface_in_bounds_is_an_error():
     with pytest.raises(ValueError, match="no surface"):
         fractalc.loads(SPHERE).mesh(resolution=8, bounds=(2, 2, 2, 3, 3, 3))
@@ -215,6 +230,7 @@ def small_mesh():
     return fractalc.loads(SPHERE).mesh(resolution=12)
 
 
+@pytest.mark.opencl
 def test_stl_file_holds_every_triangle(small_mesh, tmp_path):
     path = tmp_path / "sphere.stl"
     small_mesh.save(str(path))
@@ -225,6 +241,7 @@ def test_stl_file_holds_every_triangle(small_mesh, tmp_path):
     assert np.array_equal(record["v"], small_mesh.vertices[small_mesh.faces])
 
 
+@pytest.mark.opencl
 def test_ply_file_round_trips(small_mesh, tmp_path):
     path = tmp_path / "sphere.ply"
     small_mesh.save(str(path))
@@ -238,6 +255,7 @@ def test_ply_file_round_trips(small_mesh, tmp_path):
     assert np.all(faces["n"] == 3) and np.array_equal(faces["i"], small_mesh.faces)
 
 
+@pytest.mark.opencl
 def test_obj_file_round_trips(small_mesh, tmp_path):
     path = tmp_path / "sphere.obj"
     small_mesh.save(str(path))
@@ -248,12 +266,14 @@ def test_obj_file_round_trips(small_mesh, tmp_path):
     assert np.array_equal(np.array([[int(c.split("//")[0]) - 1 for c in f] for f in faces]), small_mesh.faces)
 
 
+@pytest.mark.opencl
 def test_unknown_extension_is_refused(small_mesh, tmp_path):
     with pytest.raises(ValueError, match=".stl"):
         small_mesh.save(str(tmp_path / "sphere.dae"))
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.opencl
 def test_cli_writes_a_mesh(tmp_path, capsys):
     scene = tmp_path / "s.frac"
     scene.write_text(SPHERE)

@@ -23,6 +23,7 @@ def image(scene):
     return scene.render()
 
 
+@pytest.mark.opencl
 def test_image_shows_itself_as_its_srgb_png(image, tmp_path):
     data = image._repr_png_()
     assert data[:8] == b"\x89PNG\r\n\x1a\n"
@@ -36,6 +37,7 @@ def test_image_shows_itself_as_its_srgb_png(image, tmp_path):
     assert pixels[0][6, 8, :3].max() > 0    # the ball, lit, in the middle
 
 
+@pytest.mark.opencl
 def test_image_repr_is_short(image):
     text = repr(image)
     assert text.startswith("<Image 16x12, channels R G B A Z N.x N.y N.z steps")
@@ -49,6 +51,7 @@ def test_scene_repr_names_file_params_precision_and_device(scene, monkeypatch):
     assert repr(other) == "<Scene ball.frac: params r=1.5; precision double; device cpu>"
 
 
+@pytest.mark.opencl
 def test_public_camera_renders_its_view(scene):
     front = scene.render(camera=fractalc.Camera(position=(0, -4, 0), target=(0, 0, 0), fov=40))
     side = scene.render(camera=fractalc.Camera(position=(3, -4, 0), target=(3, 0, 0), fov=40))

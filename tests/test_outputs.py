@@ -152,6 +152,7 @@ def wait_for(condition, process, timeout=120):
 POSIX_ONLY = pytest.mark.skipif(sys.platform == "win32", reason="SIGTERM and SIGHUP are POSIX signals")
 
 
+@pytest.mark.opencl
 @POSIX_ONLY
 def test_sigterm_while_writing_leaves_no_temporary_file(work):
     (work / "out.exr").write_bytes(b"the previous image")
@@ -167,6 +168,7 @@ def test_sigterm_while_writing_leaves_no_temporary_file(work):
     assert (work / "out.exr").read_bytes() == b"the previous image"
 
 
+@pytest.mark.opencl
 @POSIX_ONLY
 def test_sighup_while_rendering_frames_leaves_whole_frames_only(work):
     process = subprocess.Popen(command("animate", "fly.frac", "-o", "frames/f_%02d.png", "--fps", 4,
@@ -193,6 +195,7 @@ def save_text(path):
     cli._write_text_atomically(str(path), "kernel source\n")
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("save", [save_image, save_text])
 def test_a_replaced_file_keeps_its_mode_and_a_new_one_gets_the_umask(tmp_path, save):
     output = tmp_path / "out.png"
@@ -220,6 +223,7 @@ def test_the_kernels_array_is_the_image_without_a_copy():
     assert np.array_equal(image, expected)
 
 
+@pytest.mark.opencl
 def test_an_odd_sized_render_writes_the_right_pixels(tmp_path):
     # 61 columns: the kernel's rows are padded, so the image is compacted in place
     image = fractalc.loads(CHEAP).render(width=61, height=13)
@@ -247,6 +251,7 @@ print(before, peak())
 """
 
 
+@pytest.mark.opencl
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="peak RSS from /proc/self/status")
 @pytest.mark.parametrize("name", ["out.png", "out.exr"])
 def test_a_renders_memory_is_the_image_plus_a_little(tmp_path, name):
@@ -266,6 +271,7 @@ def stamps(folder):
     return {p.name: p.stat().st_mtime_ns for p in sorted(Path(folder).iterdir())}
 
 
+@pytest.mark.opencl
 def test_a_rerun_with_the_same_settings_keeps_every_frame(tmp_path):
     scene = fractalc.loads(ANIMATED)
     pattern = str(tmp_path / "f_%d.png")
@@ -275,6 +281,7 @@ def test_a_rerun_with_the_same_settings_keeps_every_frame(tmp_path):
     assert stamps(tmp_path) == before
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("change", ["size", "samples", "fps", "seed", "text", "params", "precision"])
 def test_a_rerun_with_other_settings_renders_the_stale_frames(tmp_path, change):
     text = ANIMATED.replace("path {", "param r = 1 in [0.5, 2]\npath {").replace("sphere(1)", "sphere(r)")
@@ -303,6 +310,7 @@ def test_a_rerun_with_other_settings_renders_the_stale_frames(tmp_path, change):
     assert render_frames(scene, pattern, **again)[1] == 0
 
 
+@pytest.mark.opencl
 def test_frames_from_elsewhere_are_rendered_again(tmp_path):
     (tmp_path / "f_1.png").write_bytes(b"not a frame")
     oiio.ImageBuf(oiio.ImageSpec(16, 12, 4, oiio.UINT8)).write(str(tmp_path / "f_2.png"))  # no stamp
@@ -311,6 +319,7 @@ def test_frames_from_elsewhere_are_rendered_again(tmp_path):
     assert oiio.ImageInput.open(files[1]).spec().width == 16
 
 
+@pytest.mark.opencl
 def test_the_cli_rerenders_frames_after_the_size_changes(tmp_path):
     (tmp_path / "fly.frac").write_text(ANIMATED)
     args = ("animate", "fly.frac", "-o", "frames/f_%d.png", "--fps", 4)

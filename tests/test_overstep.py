@@ -8,6 +8,8 @@ import pytest
 import fractalc
 from fractalc import cli, overstep
 
+pytestmark = pytest.mark.opencl
+
 
 @pytest.mark.parametrize("text", ["scene sphere(1)", "scene box((1, 2, 0.5)).round(0.1)",
                                   "scene sphere(1) | box(0.8).translate((1, 0, 0))",

@@ -24,6 +24,7 @@ def furnace(albedo: float, **build):
     """, **build)
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("build", [{}, {"lanes": 1}, {"precision": "double"}])
 def test_white_furnace(build, driver):
     build = dict(build, device=driver)
@@ -54,6 +55,7 @@ def sky_irradiance(normals, zenith, horizon, ground):
     return cosines @ radiance * (4 * math.pi / count)
 
 
+@pytest.mark.opencl
 def test_sky_light_on_a_diffuse_sphere_matches_quadrature():
     sky = {"zenith": (0.2, 0.4, 1.0), "horizon": (0.9, 0.8, 0.7), "ground": (0.1, 0.3, 0.05)}
     text = f"""
@@ -83,6 +85,7 @@ render {{ width: 24, height: 16, integrator: path, bounces: 1, epsilon: 1e-5, {D
 """
 
 
+@pytest.mark.opencl
 def test_a_directional_light_on_a_diffuse_plane_is_albedo_times_intensity_times_cosine():
     scene = fractalc.loads(PLANE + "light directional { direction: (1, 0.5, -2), intensity: 1.5 }")
     rgb = scene.render(samples=4).rgba[..., :3]
@@ -90,6 +93,7 @@ def test_a_directional_light_on_a_diffuse_plane_is_albedo_times_intensity_times_
     assert np.abs(rgb - 0.6 * 1.5 * cosine).max() < 1e-4     # the same as the direct renderer's diffuse term
 
 
+@pytest.mark.opencl
 def test_a_point_light_falls_off_with_the_square_of_the_distance():
     scene = fractalc.loads(PLANE + "light point { position: (0.5, 0.5, 1.2), intensity: 3, color: (1, 0.5, 0.2) }")
     image = scene.render(samples=16, aovs=["P"])
@@ -105,6 +109,7 @@ def test_a_point_light_falls_off_with_the_square_of_the_distance():
     np.testing.assert_allclose(image.rgba[..., 2] / image.rgba[..., 0], 0.2, rtol=1e-4)
 
 
+@pytest.mark.opencl
 def test_shadows_block_exactly_the_light_the_occluder_covers():
     scene = fractalc.loads(PLANE.replace("scene plane()", "scene sphere(0.7).translate((0, 0, 1.2)) | plane()")
                            + "light directional { direction: (0.5, 0, -1) }")
@@ -136,6 +141,7 @@ render { width: 16, height: 12, integrator: path, bounces: 4,
 """
 
 
+@pytest.mark.opencl
 def test_the_same_seed_gives_the_same_image():
     scene = fractalc.loads(SCENE)
     first, again = scene.render(samples=24, seed=7).rgba, scene.render(samples=24, seed=7).rgba
@@ -144,6 +150,7 @@ def test_the_same_seed_gives_the_same_image():
     assert np.abs(first - other).max() > 0.01
 
 
+@pytest.mark.opencl
 def test_rmse_falls_as_one_over_the_square_root_of_the_samples():
     scene = fractalc.loads(SCENE)
     reference = scene.render(samples=4096, seed=1000).rgba[..., :3]
@@ -166,6 +173,7 @@ def test_pass_frames_split_the_samples_with_a_seed_each():
     assert [p.seed for p in pathtrace.pass_frames(run.Frame(16, 12, 40, 6, ()))] != [p.seed for p in passes]
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("example", ["csg", "mandelbulb"])
 def test_both_integrators_light_the_shipped_examples_alike(example):
     # mean luminance of what a PNG shows (the file's tone curve, sRGB),
@@ -185,6 +193,7 @@ def test_both_integrators_light_the_shipped_examples_alike(example):
     assert luminance["path"] == pytest.approx(luminance["direct"], rel=0.15), luminance
 
 
+@pytest.mark.opencl
 def test_the_direct_renderer_stays_the_default_and_has_no_path_tracer():
     scene = fractalc.loads(SCENE.replace("integrator: path, ", ""))
     assert scene.checked.render.integrator == "direct"
@@ -192,6 +201,7 @@ def test_the_direct_renderer_stays_the_default_and_has_no_path_tracer():
     assert "path_color" in fractalc.loads(SCENE).kernel_source()
 
 
+@pytest.mark.opencl
 def test_the_viewer_keeps_refining_a_still_path_traced_view(tmp_path, monkeypatch):
     import io
     monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
@@ -211,6 +221,7 @@ def test_the_viewer_keeps_refining_a_still_path_traced_view(tmp_path, monkeypatc
     assert errors[64] < 0.5 * errors[8], errors      # 1/sqrt(8) would be 0.35
 
 
+@pytest.mark.opencl
 def test_the_albedo_pass_is_the_material_colour_of_the_centre_hit():
     scene = fractalc.loads(SCENE)
     image = scene.render(aovs=["albedo", "material"])
@@ -239,6 +250,7 @@ def test_denoising_without_open_image_denoise_says_how_to_install_it(tmp_path, m
     assert not out.exists()
 
 
+@pytest.mark.opencl
 def test_denoising_a_path_traced_image_brings_it_nearer_the_converged_one():
     import pyoidn  # noqa: F401  (in the test extra: a missing denoiser fails here, it does not skip)
     scene = fractalc.loads(SCENE)
@@ -262,6 +274,7 @@ render {{ width: 32, height: 24, integrator: path, bounces: 1, epsilon: 1e-5, {D
 """
 
 
+@pytest.mark.opencl
 def test_a_sphere_light_lights_a_plane_like_a_point_light_at_its_centre():
     # a sphere wholly above a surface gives it the irradiance of a point
     # of the same power at its centre: albedo * colour * intensity * cos / d^2
@@ -275,6 +288,7 @@ def test_a_sphere_light_lights_a_plane_like_a_point_light_at_its_centre():
     np.testing.assert_allclose(image.rgba[..., 2][near], 0.7 * expected[near], rtol=0.02)
 
 
+@pytest.mark.opencl
 def test_a_sphere_light_casts_the_penumbra_of_the_part_of_it_an_edge_hides():
     # a thin plate over x < 0 at height 0.8: each floor point sees the
     # light's disc (angular radius a) cut by the plate's edge, whose great
@@ -307,6 +321,7 @@ def test_a_sphere_light_casts_the_penumbra_of_the_part_of_it_an_edge_hides():
     assert np.all(seen[expected[floor] == 0] == 0) and np.all(seen[expected[floor] == 1] > 0.99)
 
 
+@pytest.mark.opencl
 def test_the_direct_renderer_lights_with_a_sphere_as_a_point_with_soft_shadows():
     text = AREA.replace("OCCLUDER", "sphere(0.3).translate((0, 0, 0.6)) |").replace("integrator: path, ", "")
     sphere = fractalc.loads(text).render()
@@ -315,6 +330,7 @@ def test_the_direct_renderer_lights_with_a_sphere_as_a_point_with_soft_shadows()
     assert np.array_equal(sphere.rgba, point.rgba)
 
 
+@pytest.mark.opencl
 def test_a_clear_glass_ball_vanishes_in_a_uniform_environment():
     # the furnace test of a dielectric: a path is reflected (Fresnel) or
     # goes through, and either way it escapes to the environment's 1
@@ -332,6 +348,7 @@ def fresnel(cosine, ior):
     return (s * s + p * p) / 2
 
 
+@pytest.mark.opencl
 def test_glass_reflects_the_fresnel_fraction_of_the_light(tmp_path):
     # a wide glass slab under a map bright above the horizon and black
     # below: a path reflected at the top face sees 1, one that goes through
@@ -360,6 +377,7 @@ def test_glass_reflects_the_fresnel_fraction_of_the_light(tmp_path):
     assert value[cosine > 0.8].mean() < 0.07 and value[cosine < 0.4].mean() > 0.15
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("ior", [1.0, 1.5])
 def test_a_glass_ball_shows_the_wall_behind_it_refracted_as_the_direct_renderer_does(ior):
     from test_effects import W, H, _glass_scene, _through_the_sphere
@@ -385,6 +403,7 @@ def write_map(path, pixels):
     output.close()
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("build", [{}, {"lanes": 1}, {"precision": "double"}])
 def test_a_uniform_environment_map_is_a_white_furnace_too(tmp_path, build):
     write_map(tmp_path / "white.exr", np.ones((16, 32, 3)))
@@ -397,6 +416,7 @@ def test_a_uniform_environment_map_is_a_white_furnace_too(tmp_path, build):
     assert np.all(image.rgba[..., 0][image.rgba[..., 3] == 0] == 1), "misses see the map"
 
 
+@pytest.mark.opencl
 def test_importance_sampling_a_sharp_sun_beats_sampling_by_solid_angle(tmp_path, monkeypatch):
     from fractalc import pathtrace
     sky = np.zeros((64, 128, 3)) + np.array([0.1, 0.15, 0.3]) * np.linspace(1, 0.2, 64)[:, None, None]
@@ -441,6 +461,7 @@ def polygon_irradiance(p, corners, normal, radiance):
     return radiance / 2 * np.abs(total)
 
 
+@pytest.mark.opencl
 def test_a_rectangle_light_gives_a_plane_the_irradiance_of_lamberts_polygon_formula():
     text = PLANE.replace("camera { position: (0, -3, 2)", "camera { position: (0, -3, 3)") + \
         "light rectangle { position: (0.5, 0, 1.2), direction: (0, 0, -1), width: 1.5, height: 0.5, intensity: 3 }"
@@ -464,6 +485,7 @@ def test_a_rectangle_light_gives_a_plane_the_irradiance_of_lamberts_polygon_form
     np.testing.assert_allclose(direct.rgba[..., 0], point, rtol=1e-4)
 
 
+@pytest.mark.opencl
 def test_a_render_farm_tile_of_a_path_traced_image_is_those_rows_of_the_local_render():
     from fractalc.cluster import _render_tile
     scene = fractalc.loads(SCENE)
@@ -474,6 +496,7 @@ def test_a_render_farm_tile_of_a_path_traced_image_is_those_rows_of_the_local_re
     assert np.array_equal(np.concatenate([top, bottom])[..., :4], local.rgba)
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("build", [{}, {"lanes": 1, "precision": "double"}])   # (a GPU's lanes)
 def test_a_camera_ray_at_an_area_light_sees_its_radiance(build):
     # a ball of radiance c I / r^2 and a panel of radiance pi c I / area
@@ -524,6 +547,7 @@ def renders(text, monkeypatch, mis, seeds, samples, **keys):
     return np.array([scene.render(samples=samples, seed=seed, **keys).rgba[..., :3] for seed in seeds], dtype=float)
 
 
+@pytest.mark.opencl
 def test_multiple_importance_sampling_agrees_with_next_event_estimation_alone(tmp_path, monkeypatch):
     # a diffuse ball and floor under a sphere light, a rectangle light and an
     # environment map: both estimators are unbiased, so their means agree
@@ -540,6 +564,7 @@ def test_multiple_importance_sampling_agrees_with_next_event_estimation_alone(tm
     assert surface.sum() > 2000 and abs(difference) < 3 * error, (difference, error)
 
 
+@pytest.mark.opencl
 def test_multiple_importance_sampling_lowers_the_error_on_a_glossy_floor_under_a_large_light(monkeypatch):
     # the panel's reflection in a sharp glossy floor: next-event estimation
     # rarely draws a point in the narrow lobe, the lobe finds the panel

@@ -65,6 +65,7 @@ def _cli(*args, cwd):
     return subprocess.run([sys.executable, "-m", "fractalc", *args], capture_output=True, text=True, cwd=cwd)
 
 
+@pytest.mark.opencl
 def test_render_takes_a_preset_and_set_wins_over_it(tmp_path):
     (tmp_path / "scene.frac").write_text(SCENE)
     done = _cli("render", "scene.frac", "-o", "out.exr", "--width", "4", "--height", "4", "--preset", "big",

@@ -144,6 +144,7 @@ SPHERE_CAMERAS = {
 }
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("name", SPHERE_CAMERAS)
 def test_sphere_depth_and_normals(name):
     camera = SPHERE_CAMERAS[name]
@@ -153,6 +154,7 @@ def test_sphere_depth_and_normals(name):
     check_against_analytic(image, t, n, origin, dirs)
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("name", ["centred", "oblique"])
 def test_forward_normals_reuse_the_marchs_last_estimate(name):
     """`normals: forward` differences three evaluations against the one the
@@ -166,6 +168,7 @@ def test_forward_normals_reuse_the_marchs_last_estimate(name):
     check_against_analytic(image, t, n, origin, dirs)
 
 
+@pytest.mark.opencl
 def test_sphere_off_centre():
     """A translated sphere away from the image centre (the camera looks at the origin)."""
     camera = SPHERE_CAMERAS["oblique"]
@@ -183,6 +186,7 @@ def test_sphere_off_centre():
     dict(position=(2.5, -3, 2), target=(0, 0, 0), up=(0, 0, 1), fov=45),
     dict(position=(-3, -1, -1.5), target=(0.2, 0, 0.1), up=(0, 0, 1), fov=45),
 ], ids=["above", "below"])
+@pytest.mark.opencl
 def test_box_depth_and_normals(camera):
     centre, size = (0.2, 0.1, -0.1), (1.2, 1.6, 0.8)
     image = render_scene(f"box({size}).translate({centre})", camera)
@@ -254,6 +258,7 @@ def check_planes_sane(image, max_steps):
     return hit
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("name", SANE_SCENES)
 def test_output_planes_are_sane(name):
     scene = fractalc.loads(SANE_SCENES[name])
@@ -272,6 +277,7 @@ def test_output_planes_are_sane(name):
     ("plane(offset: 1)", (0, 0, 0)),                       # below the plane: inside
     ("sphere(1).translate((0, 0, 0.2)) | box(0.1).translate((3, 0, 0))", (0, 0, 0)),
 ])
+@pytest.mark.opencl
 def test_camera_inside_a_solid_hits_at_zero(shape, position):
     text = (f"scene {shape}\ncamera {{ position: {position}, target: (1, 2, 0.5) }}\n"
             "light directional { direction: (0, 0, -1), shadows: soft }\nrender { ao: 0.5 }")
@@ -295,6 +301,7 @@ AA_SCENE = textwrap.dedent("""\
     """)
 
 
+@pytest.mark.opencl
 def test_samples_antialias_only_silhouettes():
     scene = fractalc.loads(AA_SCENE)
     one = scene.render(samples=1)
@@ -346,6 +353,7 @@ def _built(scene, lanes):
     return build_module.build(source, device), device
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("lanes", [1, 4, 16])
 def test_lanes_agree_with_eight(lanes):
     scene = fractalc.loads(LANES_SCENE)
@@ -373,6 +381,7 @@ def test_lanes_agree_with_eight(lanes):
     np.testing.assert_allclose(d[lanes], d[8], rtol=1e-5, atol=1e-5)
 
 
+@pytest.mark.opencl
 def test_tiles_join_seamlessly(monkeypatch):
     """Small tiles (several per row and column, ragged at the edges) give the
     same image as one tile."""
@@ -401,6 +410,7 @@ def _unique_scene():
     return PARAM_SCENE.replace("box(0.5)", f"box({0.5 + int(uuid.uuid4().hex[:6], 16) * 1e-9:.9f})")
 
 
+@pytest.mark.opencl
 def test_params_change_the_image_without_rebuilding():
     text = _unique_scene()
     before = build_module.statistics.builds
@@ -426,6 +436,7 @@ def test_params_change_the_image_without_rebuilding():
     assert build_module.statistics.builds == builds
 
 
+@pytest.mark.opencl
 def test_same_text_and_runtime_settings_do_not_rebuild():
     text = _unique_scene()
     warm = fractalc.loads(text)
@@ -442,6 +453,7 @@ def test_same_text_and_runtime_settings_do_not_rebuild():
     assert not np.array_equal(aa.rgba, small.rgba)
 
 
+@pytest.mark.opencl
 def test_compiled_settings_do_rebuild():
     """A setting compiled into the kernel (max_steps) builds a new program,
     so the no-rebuild checks above are not vacuous."""
@@ -452,6 +464,7 @@ def test_compiled_settings_do_rebuild():
     assert build_module.statistics.builds == builds + 1
 
 
+@pytest.mark.opencl
 def test_render_keyword_precision_overrides_the_file():
     """LANGUAGE.md: `render` accepts every render key as a keyword argument,
     overriding the file; `precision` is a render key."""
@@ -468,6 +481,7 @@ LIBRARY_EXTRAS = ("sd_torus", "sd_box", "soft_shadow", "hard_shadow", "ambient_o
                   "smooth_min", "twist_point")
 
 
+@pytest.mark.opencl
 def test_kernel_source_holds_only_what_the_scene_uses():
     source = fractalc.loads("scene sphere(1)").kernel_source()
     assert "sd_sphere" in source
@@ -475,6 +489,7 @@ def test_kernel_source_holds_only_what_the_scene_uses():
         assert name not in source, name
 
 
+@pytest.mark.opencl
 def test_kernel_source_names_are_real_library_functions():
     """The names checked for absence above do appear when a scene uses them."""
     source = fractalc.loads(textwrap.dedent("""\
@@ -487,6 +502,7 @@ def test_kernel_source_names_are_real_library_functions():
         assert re.search(rf"\b{name}\s*\(", source), name
 
 
+@pytest.mark.opencl
 def test_kernel_source_of_shadows_and_ao():
     source = fractalc.loads(textwrap.dedent("""\
         scene sphere(1) | plane(offset: -1)
@@ -500,6 +516,7 @@ def test_kernel_source_of_shadows_and_ao():
 FLOAT_LITERAL = re.compile(r"(?<![\w.])(?:\d+\.\d*|\.\d+|\d+(?=[eE]))(?:[eE][+-]?\d+)?[fF]\b")
 
 
+@pytest.mark.opencl
 def test_double_source_has_no_float_literals():
     text = textwrap.dedent("""\
         scene union(sphere(1.5), torus(0.75, 0.125).twist(0.5), smooth: 0.25) | plane(offset: -1e-3)
@@ -534,6 +551,7 @@ def _float_code(source: str) -> str:
     return "\n".join(lines)
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("example", sorted(p.name for p in (REPO / "examples").glob("*.frac")))
 def test_float_kernels_have_no_double_literals(example):
     """An unsuffixed literal is a double in OpenCL C and promotes the
@@ -611,6 +629,7 @@ def _cli(*args, cwd):
                           capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.opencl
 def test_standalone_kernel_matches_fractalc_render(tmp_path):
     import json
     import OpenImageIO as oiio
@@ -647,6 +666,7 @@ def test_standalone_kernel_matches_fractalc_render(tmp_path):
     np.testing.assert_allclose(standalone[8], planes["steps"])
 
 
+@pytest.mark.opencl
 def test_fast_math_is_float_only_and_by_default_where_the_driver_s_native_functions_are_exact():
     text = "param p = 7 in [2, 16]\nscene mandelbulb(power: p)\n"
     scene = fractalc.loads(text)
@@ -691,6 +711,7 @@ BOUND_SCENES = {   # name: (scene, whether the scene has a bound)
 UNBOUNDED = " | sphere(0.1).translate((0, 0, -60)).repeat((300, 300, 0))"
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("shape", sorted(BOUND_SCENES))
 def test_the_scene_bound_changes_nothing_but_the_work(shape):
     """Rays start and end at the scene's bounding sphere, and skip it
@@ -724,6 +745,7 @@ def test_the_scene_bound_changes_nothing_but_the_work(shape):
     ("render { glow: { strength: 0.5 } }\nlight directional { direction: (0, 0, -1), shadows: hard }",
      (True, True)),                                               # ... but shadow rays still stop
 ])
+@pytest.mark.opencl
 def test_the_bound_is_in_the_kernel_only_where_used(decls, expected):
     source = fractalc.loads(f"scene sphere(1) | plane()\n{decls}").kernel_source()
     defined = tuple(bool(re.search(rf"^\w+ {name}\(", source, re.M))

@@ -33,6 +33,7 @@ def test_no_opencl_platform_says_how_to_install_pocl(tmp_path, command):
     assert not (tmp_path / "out.png").exists()
 
 
+@pytest.mark.opencl
 def test_a_kernel_that_fails_to_build_is_reported_with_its_log(tmp_path, monkeypatch, capsys):
     (tmp_path / "scene.frac").write_text(SCENE)
     real_build = build.build
@@ -50,6 +51,7 @@ def test_a_kernel_that_fails_to_build_is_reported_with_its_log(tmp_path, monkeyp
     assert not (tmp_path / "out.png").exists()
 
 
+@pytest.mark.opencl
 def test_ctrl_c_stops_cleanly_without_output(tmp_path, monkeypatch, capsys):
     (tmp_path / "scene.frac").write_text(SCENE)
     out = tmp_path / "out.png"
@@ -66,6 +68,7 @@ def test_ctrl_c_stops_cleanly_without_output(tmp_path, monkeypatch, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png", "scene.frac"]   # no temporary left
 
 
+@pytest.mark.opencl
 def test_an_interrupted_render_waits_for_the_tiles_it_queued():
     """The kernel writes into the array the render returns; when Ctrl-C
     stops a render between tiles, no queued tile may still be writing once
@@ -173,6 +176,7 @@ def _nothing_half_written(tmp_path) -> None:
     assert all(name.startswith("f_") and name.endswith(".png") for name in left), left   # whole frames only
 
 
+@pytest.mark.opencl
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads the worker's pid in /proc")
 @pytest.mark.parametrize("command", ["render", "animate"])
 def test_sigint_sent_to_the_launcher_stops_the_work_as_ctrl_c_does(tmp_path, command):
@@ -240,6 +244,7 @@ def _one_line_out_of_memory(result, *names) -> None:
     (["mesh", "scene.frac", "-o", "m.ply", "--resolution", "16384"], ["resolution 16384"]),
     (["render", "scene.frac", "-o", "o.exr", "--width", "65536", "--height", "65536"], ["width 65536"]),
 ])
+@pytest.mark.opencl
 def test_work_beyond_an_address_space_limit_is_refused_in_one_line(argv, names, tmp_path):
     """Under a 2 GB limit: check --de --rays and mesh --resolution 16384 (the
     documented maximum) were MemoryError tracebacks; each is refused before
@@ -274,6 +279,7 @@ def test_a_memory_error_anywhere_is_one_line_with_exit_1(command, tmp_path, caps
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.frac"]
 
 
+@pytest.mark.opencl
 def test_memory_estimates_refuse_before_any_work(monkeypatch, capsys, tmp_path):
     """With 64 MiB available: a render's image, a local cluster's workers,
     check --de's rays and a mesh's slabs are refused, naming each, before

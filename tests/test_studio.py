@@ -88,6 +88,7 @@ def canvas_pixels(page) -> np.ndarray:
     return np.asarray(Image.open(io.BytesIO(page.locator("#image").screenshot())).convert("RGB"), dtype=float)
 
 
+@pytest.mark.opencl
 def test_the_page_shows_an_image(page):
     frame = settled(page)
     assert (frame["width"], frame["height"]) == (64, 48)
@@ -95,6 +96,7 @@ def test_the_page_shows_an_image(page):
     assert pixels.std() > 10           # a picture (sphere, floor, sky), not one colour
 
 
+@pytest.mark.opencl
 def test_moving_a_slider_changes_the_image_without_a_rebuild(page):
     before = settled(page)
     value = page.locator("#param-blend-range").input_value()
@@ -113,6 +115,7 @@ def _type_at(page, after: str, typed: str) -> None:
     page.keyboard.type(typed)
 
 
+@pytest.mark.opencl
 def test_a_typed_mistake_is_marked_at_its_line_and_fixing_it_brings_the_image_back(page):
     settled(page)
     _type_at(page, "plane(offset: -0.6", ", colour: 2")       # line 9: plane has no 'colour'
@@ -137,6 +140,7 @@ def _only_literals_differ(before: str, after: str) -> bool:
     return len(old) == len(new) and all(numbers.sub("#", a) == numbers.sub("#", b) for a, b in zip(old, new))
 
 
+@pytest.mark.opencl
 def test_a_keyframe_and_saving_write_a_path_block(page, studio):
     settled(page)
     page.locator("#time").fill("0")
@@ -168,6 +172,7 @@ def test_a_keyframe_and_saving_write_a_path_block(page, studio):
     page.wait_for_function("!Object.values(studio.dirty).some(v => v === true)")
 
 
+@pytest.mark.opencl
 def test_a_flood_of_changes_renders_the_newest_only(page):
     settled(page)
     frames = page.evaluate("studio.frames")
@@ -183,6 +188,7 @@ def test_a_flood_of_changes_renders_the_newest_only(page):
     assert page.evaluate("studio.frames") - frames < 100
 
 
+@pytest.mark.opencl
 def test_a_change_of_the_file_on_disk_reloads_the_page(page, studio):
     settled(page)
     page.wait_for_function("!studio.dirty.text")
@@ -208,6 +214,7 @@ def _read(path) -> np.ndarray:
     return pixels
 
 
+@pytest.mark.opencl
 def test_a_final_render_writes_what_its_command_line_renders(page, studio, tmp_path):
     settled(page)
     page.locator("#param-size-range").fill("0.9")         # a live value: --set on the command line
@@ -229,6 +236,7 @@ def test_a_final_render_writes_what_its_command_line_renders(page, studio, tmp_p
     assert np.array_equal(_read(output), _read(again))
 
 
+@pytest.mark.opencl
 def test_a_final_render_can_be_cancelled(page, tmp_path):
     settled(page)
     if page.evaluate("studio.keyframes.length") < 2:
@@ -279,6 +287,7 @@ def test_requests_without_the_token_or_from_another_site_are_refused(studio):
     assert _request(studio, "/socket" + token, {**WEBSOCKET, "Origin": "http://evil.example"}) == 403
 
 
+@pytest.mark.opencl
 def test_saving_a_file_with_crlf_line_breaks_keeps_them(tmp_path):
     """The session alone (no server, no browser): a live param saved into a
     Windows file changes that literal, and every line break stays CRLF."""
@@ -330,6 +339,7 @@ def test_command_line_mistakes_are_usage_errors(tmp_path, arguments, says):
 
 @pytest.mark.skipif(not os.environ.get("FRACTALC_STUDIO_SCREENSHOTS"),
                     reason="FRACTALC_STUDIO_SCREENSHOTS=FOLDER takes the docs' screenshots")
+@pytest.mark.opencl
 def test_screenshots_for_the_docs(tmp_path):
     reason = browser_missing()
     if reason:

@@ -47,6 +47,7 @@ def number(row, column):
     return float(row[column])
 
 
+@pytest.mark.opencl
 def test_csv_has_every_column_and_the_planned_rows(tiny_sweep):
     _, rows, _ = tiny_sweep
     assert NAMED_COLUMNS <= set(rows[0]) and list(rows[0]) == list(CSV_COLUMNS)
@@ -61,6 +62,7 @@ def test_csv_has_every_column_and_the_planned_rows(tiny_sweep):
     assert reference["samples"] == scene["samples"]
 
 
+@pytest.mark.opencl
 def test_figures_are_ordered_and_consistent(tiny_sweep):
     _, rows, _ = tiny_sweep
     for row in rows:
@@ -73,6 +75,7 @@ def test_figures_are_ordered_and_consistent(tiny_sweep):
         assert number(row, "psnr_db") == pytest.approx(expected_psnr)
 
 
+@pytest.mark.opencl
 def test_reference_row_has_zero_error_and_the_others_some(tiny_sweep):
     _, rows, _ = tiny_sweep
     reference = rows[-1]
@@ -84,6 +87,7 @@ def test_reference_row_has_zero_error_and_the_others_some(tiny_sweep):
     assert number(reference, "render_ms_median") > number(rows[0], "render_ms_median")
 
 
+@pytest.mark.opencl
 def test_pareto_column_is_the_non_dominated_rows(tiny_sweep):
     _, rows, _ = tiny_sweep
     measured = [r for r in rows if r["reference"] == "False"]
@@ -99,6 +103,7 @@ def test_pareto_column_is_the_non_dominated_rows(tiny_sweep):
     assert any(row["pareto"] == "True" for row in measured)
 
 
+@pytest.mark.opencl
 def test_table_and_plot(tiny_sweep):
     result, _, directory = tiny_sweep
     for text in (SCENE_LABEL, "epsilon_scale=2", REFERENCE_LABEL, "RMSE", "PSNR", "sRGB", "2 renders", "machine"):
@@ -121,6 +126,7 @@ def test_usage_errors(tmp_path, args, mentions):
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.opencl
 def test_combinations_are_timed_in_the_same_rounds_as_the_other_rows():
     scene = fractalc.load(MANDELBULB)
     messages = []
@@ -212,6 +218,7 @@ def test_grid_moves_one_knob_away_from_the_scene_and_the_reference_is_finer():
                          "fast_math": "off", "cone_marching": "off"}
 
 
+@pytest.mark.opencl
 def test_auto_fast_math_is_the_scenes_row_as_it_runs_on_the_device():
     from fractalc.sweep import scene_settings
     scene = fractalc.loads("scene sphere(1)")

@@ -86,6 +86,7 @@ def reference(viewer, samples):
 @pytest.mark.parametrize("code, axis, sign", [
     (pygame.K_w, "forward", 1), (pygame.K_s, "forward", -1), (pygame.K_d, "right", 1),
     (pygame.K_a, "right", -1), (pygame.K_e, "up", 1), (pygame.K_q, "up", -1)])
+@pytest.mark.opencl
 def test_a_held_key_moves_the_camera_by_speed_times_time(scene_file, code, axis, sign):
     viewer = viewer_of(scene_file)
     start = np.array(viewer.camera.position)
@@ -137,6 +138,7 @@ def test_dragging_turns_the_view_and_never_flips_it(scene_file):
 
 # ---- refining a still view ----------------------------------------------------
 
+@pytest.mark.opencl
 def test_a_still_view_refines_toward_the_render_of_the_same_camera(scene_file):
     viewer = viewer_of(scene_file, max_samples=32)
     viewer.step(0.05)                                        # the first frame: a preview
@@ -153,6 +155,7 @@ def test_a_still_view_refines_toward_the_render_of_the_same_camera(scene_file):
     assert viewer.step(0.05) is False                        # max_samples reached: nothing more to do
 
 
+@pytest.mark.opencl
 def test_moving_starts_the_refinement_again(scene_file):
     viewer = viewer_of(scene_file)
     settle(viewer, 2 * PASS_SAMPLES)
@@ -163,6 +166,7 @@ def test_moving_starts_the_refinement_again(scene_file):
 
 # ---- the scene file -----------------------------------------------------------
 
+@pytest.mark.opencl
 def test_saving_the_file_recompiles_and_keeps_the_camera(scene_file):
     viewer = viewer_of(scene_file, max_samples=1)
     viewer.handle(key(pygame.KEYDOWN, pygame.K_d))
@@ -179,6 +183,7 @@ def test_saving_the_file_recompiles_and_keeps_the_camera(scene_file):
     assert np.array_equal(viewer.linear, reference(viewer, 1))
 
 
+@pytest.mark.opencl
 def test_a_scene_error_keeps_the_last_image_and_is_reported(scene_file):
     err = io.StringIO()
     viewer = viewer_of(scene_file, max_samples=PASS_SAMPLES, err=err)
@@ -200,6 +205,7 @@ def _words(lines) -> str:
     return "".join("".join(lines).split())
 
 
+@pytest.mark.opencl
 @pytest.mark.parametrize("size", [(320, 240), (160, 100)])
 def test_the_status_help_and_error_fit_a_small_window(scene_file, size):
     from fractalc.view import HELP, Panel, overlay, overlay_font
@@ -232,6 +238,7 @@ def test_the_status_help_and_error_fit_a_small_window(scene_file, size):
     assert source.strip()[:12] in line
 
 
+@pytest.mark.opencl
 def test_params_change_from_the_keyboard_without_recompiling(scene_file):
     viewer = viewer_of(scene_file, max_samples=1)
     settle(viewer, 1)
@@ -254,6 +261,7 @@ def test_params_change_from_the_keyboard_without_recompiling(scene_file):
 
 # ---- printing, saving, playing --------------------------------------------------
 
+@pytest.mark.opencl
 def test_c_prints_the_camera_as_a_block_that_reproduces_it(scene_file):
     viewer = viewer_of(scene_file)
     viewer.handle(key(pygame.KEYDOWN, pygame.K_w))
@@ -280,6 +288,7 @@ def test_c_keeps_the_cameras_projection_and_stereo_keys(scene_file):
     assert "eye_separation" not in block        # at its default: left out
 
 
+@pytest.mark.opencl
 def test_p_saves_the_view_as_png_and_exr_with_metadata(scene_file):
     oiio = pytest.importorskip("OpenImageIO")
     viewer = viewer_of(scene_file, max_samples=PASS_SAMPLES)
@@ -298,6 +307,7 @@ def test_p_saves_the_view_as_png_and_exr_with_metadata(scene_file):
     assert (scene_file.parent / "ball-view-2.png").exists()
 
 
+@pytest.mark.opencl
 def test_space_plays_the_path(scene_file):
     viewer = viewer_of(scene_file)
     press(viewer, pygame.K_SPACE)

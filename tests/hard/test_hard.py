@@ -23,6 +23,8 @@ from fractalc.write import linear_to_srgb
 from test_effects import ray_sphere
 from test_fractals import bounded_reference_de, primary_rays, sphere_trace
 
+pytestmark = pytest.mark.opencl
+
 HERE = Path(__file__).resolve().parent
 PRECISIONS = ("float", "double")
 
