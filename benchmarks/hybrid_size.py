@@ -2,7 +2,7 @@
 formula steps (bulb and amazing_box in turn) with `iterations: 1000`,
 checked and then built cold (driver cache off) and rendered once at
 16x12, in a child process per size, one after another. Sets
-check.MAX_HYBRID_STEPS (issue 22).
+check_formulas.MAX_HYBRID_STEPS (issue 22).
 
     python benchmarks/hybrid_size.py 100 200 400     # prints a Markdown table
 

@@ -1,6 +1,6 @@
 """Compile time against scene size: a flat union of N translated spheres,
 built cold (driver cache off) and rendered once at 16x12, in a child
-process per size, one after another. Sets check.MAX_SHAPES (issue 10).
+process per size, one after another. Sets check_expressions.MAX_SHAPES (issue 10).
 
     python benchmarks/scene_size.py 1000 2000 4000     # prints a Markdown table
 

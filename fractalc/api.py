@@ -21,7 +21,7 @@ from .arguments import checked, require_type
 from .build import build
 from .devices import open_device
 from .denoise import denoise_image, require_denoiser
-from .check import FLOAT_MAX, RENDER_KEYS, check, check_param_values, check_value, in_float_range, unknown_param
+from .check import check, check_param_values, check_value, unknown_param
 from .emit import Target, emit, emit_distance, uniform_source
 from .errors import RenderError, SceneError, diagnostic
 from .lanes import CHOICES as LANE_CHOICES
@@ -29,13 +29,14 @@ from .lower import lower
 from .memory import require_memory
 from .parse import parse
 from .passes import PASSES, channels
-from .program import Camera, CheckedScene, RenderSettings
+from .program import CAMERA_KEYS, RENDER_KEYS, Camera, CheckedScene, Precision, RenderSettings
 from .source import read_scene_file
+from .types import FLOAT_MAX, in_float_range
 from .write import COMPRESSIONS, write
 
-PRECISIONS = ("float", "double")
+PRECISIONS = tuple(Precision)
 # change without rebuilding (exposure and tonemap: only PNG writing reads them)
-_RUNTIME_KEYS = {"width", "height", "samples", "exposure", "tonemap"}
+_RUNTIME_KEYS = {name for name, key in RENDER_KEYS.items() if key.runtime}
 CAMERA_BASE = program.Camera    # a file's camera and a fractalc.Camera made from Python alike
 SCENE_TEXT_LIMIT = 64 * 1024   # longer scene text is left out of the metadata (its sha256 and path stay)
 
@@ -102,7 +103,6 @@ class Camera(program.Camera):
     key. Looking straight along the default up, y is up instead."""
 
     def __post_init__(self):
-        from .check import CAMERA_KEYS
         for key, parameter in CAMERA_KEYS.items():
             value = getattr(self, key)
             if value is None and key == "focus":      # on the target
@@ -112,13 +112,7 @@ class Camera(program.Camera):
             except ValueError as error:   # check_value speaks of render keys
                 raise ValueError(str(error).replace(" of 'render'", " of 'camera'")) from None
             object.__setattr__(self, key, value)
-        forward = np.subtract(self.target, self.position)
-        if not np.any(forward):
-            raise ValueError("the camera's 'target' is its 'position': it looks nowhere")
-        if np.linalg.norm(np.cross(forward, self.up)) <= 1e-9 * np.linalg.norm(forward) * np.linalg.norm(self.up):
-            if self.up != program.Camera.up:
-                raise ValueError("the camera's 'up' is parallel to its view direction (target - position)")
-            object.__setattr__(self, "up", (0.0, 1.0, 0.0))
+        object.__setattr__(self, "up", self.aimed(self.up != program.Camera.up, keys_quoted=True).up)
 
 
 class Scene:
@@ -172,10 +166,9 @@ class Scene:
                                  f"not a whole number of {len(str(abs(value)))} digits") from None
             if not in_float_range(value):   # NaN would pass any range check
                 raise ValueError(f"param '{name}' must be a finite number within ±{FLOAT_MAX:.3g}, not {value!r}")
-            if (info.low is not None and value < info.low) or (info.high is not None and value > info.high):
-                raise SceneError([diagnostic(self.checked.file, self.checked.source, info.span,
-                                             f"'{name}' = {value:g} is outside its range "
-                                             f"[{info.low:g}, {info.high:g}]")])
+            outside = info.range_violation(value)
+            if outside:
+                raise SceneError([diagnostic(self.checked.file, self.checked.source, info.span, outside)])
             changed[name] = value
         check_param_values(self.checked, [changed[p.name] for p in self.checked.params])
         self.params = changed

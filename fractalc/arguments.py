@@ -1,7 +1,7 @@
 """The numeric arguments of commands and API calls that are not a scene
 file's keys (`--rays`, `--fps`, `mesh --resolution`, a render's seed, ...):
 their types and ranges, declared once as the file's keys are
-(check.RENDER_KEYS) and checked by the same function (check.check_value),
+(program.RENDER_KEYS) and checked by the same function (check.check_value),
 so that a command-line option and the API argument it becomes refuse the
 same values in the same words. Numbers on the command line are read by
 `parse_number`, in ASCII digits as in a scene file.
@@ -11,25 +11,26 @@ from __future__ import annotations
 import re
 from dataclasses import replace
 
-from .check import RENDER_KEYS, check_value
-from .stdlib import Parameter
+from .check import check_value
+from .program import RENDER_KEYS
+from .types import Parameter, Type, above, at_most, below, between
 
 SEED_LIMIT = 2 ** 32       # seeds are the kernel's 32-bit unsigned integers
 MAX_RESOLUTION = 16384     # mesh cells along the longest side (docs/meshes.md)
 
 ARGUMENTS = {p.name: p for p in (
-    Parameter("seed", "int", None, (f"0..{SEED_LIMIT - 1}",)),
-    Parameter("rays", "int", None, ("1..1000000",)),                  # check --de
-    Parameter("surface", "num", None, (">0", "<1")),                  # check --de, in bound radii
-    Parameter("fps", "num", None, (">0", "<=1000")),                  # animate
-    Parameter("frames", "int", None, ("1..100000",)),                 # bench, view --benchmark
-    Parameter("repeat", "int", None, ("1..1000",)),                   # bench
-    Parameter("resolution", "int", None, (f"2..{MAX_RESOLUTION}",)),  # mesh
-    Parameter("min_volume", "num", None, (">0",)),                    # mesh --shells solid: bodies kept
-    Parameter("workers", "int", None, ("1..1024",)),                  # a local render farm
-    Parameter("preview_scale", "int", None, ("1..64",)),              # view, studio
-    Parameter("port", "int", None, ("0..65535",)),                    # studio (0: any free port)
-    Parameter("bits", "int", None, ("8..16",)),                       # PNG output: 8 or 16
+    Parameter("seed", Type.WHOLE, None, (between(0, SEED_LIMIT - 1),)),
+    Parameter("rays", Type.WHOLE, None, (between(1, 1000000),)),                 # check --de
+    Parameter("surface", Type.NUMBER, None, (above(0), below(1))),               # check --de, in bound radii
+    Parameter("fps", Type.NUMBER, None, (above(0), at_most(1000))),              # animate
+    Parameter("frames", Type.WHOLE, None, (between(1, 100000),)),                # bench, view --benchmark
+    Parameter("repeat", Type.WHOLE, None, (between(1, 1000),)),                  # bench
+    Parameter("resolution", Type.WHOLE, None, (between(2, MAX_RESOLUTION),)),    # mesh
+    Parameter("min_volume", Type.NUMBER, None, (above(0),)),                     # mesh --shells solid: bodies kept
+    Parameter("workers", Type.WHOLE, None, (between(1, 1024),)),                 # a local render farm
+    Parameter("preview_scale", Type.WHOLE, None, (between(1, 64),)),             # view, studio
+    Parameter("port", Type.WHOLE, None, (between(0, 65535),)),                   # studio (0: any free port)
+    Parameter("bits", Type.WHOLE, None, (between(8, 16),)),                      # PNG output: 8 or 16
     replace(RENDER_KEYS["samples"], name="max_samples"),              # view: a still's samples
     replace(RENDER_KEYS["height"], name="tile_rows"),                 # a render farm's tiles
 )}

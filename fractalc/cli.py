@@ -33,7 +33,7 @@ def _parse_set(values: list[str]) -> dict[str, float]:
         name, sep, value = item.partition("=")
         if not sep or not name.strip():
             raise UsageError(f"--set takes NAME=VALUE, not '{item}'")
-        from .check import in_float_range
+        from .types import in_float_range
         try:
             number = parse_number(value)
         except ValueError as error:
@@ -105,7 +105,9 @@ def _keys_given(args) -> tuple[dict, dict]:
     """--render and --camera KEY=VALUE items, each checked as in a file's
     block (before any work): (render keys, camera keys). A block key is
     given by its parts (`--render fog.density=0.2`) or turned off (`fog=off`)."""
-    from .check import BLOCK_KEYS, CAMERA_KEYS, RENDER_KEYS, check_value
+    from .check import check_value
+    from .program import CAMERA_KEYS, RENDER_KEYS
+    from .types import Type
     found = {"--render": {}, "--camera": {}}
     for option, keys, items in (("--render", RENDER_KEYS, args.render), ("--camera", CAMERA_KEYS, args.camera)):
         owner = option[2:]
@@ -118,7 +120,7 @@ def _keys_given(args) -> tuple[dict, dict]:
                 raise UsageError(f"{option} {item}: '{owner}' has no key '{name}' (known: {', '.join(keys)})")
             value = _key_value(text)
             try:
-                if keys[name].type in BLOCK_KEYS:
+                if keys[name].type is Type.BLOCK:
                     block = found[option].get(name) or {}
                     value = False if value == "off" else {**block, **({part: value} if part else {})}
                 check_value(keys[name], name, value)

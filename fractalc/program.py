@@ -5,13 +5,16 @@ constants."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from enum import StrEnum
 from typing import Union
 
 from . import ir
 from .errors import Diagnostic, Span
-from .stdlib import Parameter, Signature
-from .write import DEFAULT_TONE_CURVE
+from .stdlib import Signature
+from .types import (NONZERO, Parameter, Type, above, at_least, at_most, below, between, key, keys_of,
+                    range_violation)
+from .write import DEFAULT_TONE_CURVE, TONE_CURVES
 
 Vector3 = tuple[float, float, float]
 
@@ -25,6 +28,16 @@ class ParamInfo:
     high: float | None
     span: Span
 
+    def range_violation(self, value: float) -> str | None:
+        """What is wrong with `value` for this param: outside its range (None: nothing)."""
+        return range_violation(self.name, value, self.low, self.high)
+
+    def as_key(self) -> Parameter:
+        """The param as a block's key (a path's keyframes, presets): a
+        constant number in its range."""
+        in_range = (between(self.low, self.high),) if None not in (self.low, self.high) else ()
+        return Parameter(self.name, Type.NUMBER, None, in_range)
+
 
 # ---- shapes ----------------------------------------------------------------
 
@@ -36,9 +49,15 @@ class Primitive:
     span: Span
 
 
+class CombinationKind(StrEnum):
+    UNION = "union"
+    INTERSECT = "intersect"
+    SUBTRACT = "subtract"
+
+
 @dataclass(frozen=True)
 class Combination:
-    kind: str                   # union | intersect | subtract
+    kind: CombinationKind
     shapes: tuple["Shape", ...]
     smooth: ir.Expr
     span: Span
@@ -124,13 +143,18 @@ def fold_shape(root: Shape, context, parts, combine):
 
 @dataclass(frozen=True)
 class Material:
+    """A material block's values (IR: they may depend on params); its
+    keys' defaults are the default material's (`default_material`)."""
     name: str
-    color: ir.Vec
-    specular: ir.Expr
-    shininess: ir.Expr
-    reflectivity: ir.Expr
-    transparency: ir.Expr
-    ior: ir.Expr
+    color: ir.Vec = key((0.8, 0.8, 0.8), Type.VEC3, between(0, 1000), field_default=False)
+    specular: ir.Expr = key(0.3, Type.NUMBER, between(0, 1), field_default=False)
+    shininess: ir.Expr = key(32.0, Type.NUMBER, above(0), field_default=False)
+    reflectivity: ir.Expr = key(0.0, Type.NUMBER, between(0, 1), field_default=False)
+    transparency: ir.Expr = key(0.0, Type.NUMBER, between(0, 1), field_default=False)
+    ior: ir.Expr = key(1.5, Type.NUMBER, between(1, 10), field_default=False)
+
+
+MATERIAL_KEYS = keys_of(Material)
 
 
 # Names the compiler makes (this one, `.color(...)`'s materials) hold
@@ -138,46 +162,120 @@ class Material:
 DEFAULT_MATERIAL = "(default)"
 
 
+def default_material() -> Material:
+    return Material(DEFAULT_MATERIAL, **{name: constant(p.default) for name, p in MATERIAL_KEYS.items()})
+
+
+def constant(value) -> ir.Expr | ir.Vec:
+    """A default's number or tuple as IR constants."""
+    return ir.Vec(tuple(ir.const(x) for x in value)) if isinstance(value, tuple) else ir.const(value)
+
+
 # A camera's projections and stereo layouts, in the order of their codes in
 # the kernel's camera block (stdlib_cl/engine/interface.cl, CAMERA_PROJECTION).
-PROJECTIONS = ("pinhole", "fisheye", "equirectangular")
-STEREO_LAYOUTS = ("none", "side_by_side", "top_bottom")
+class Projection(StrEnum):
+    PINHOLE = "pinhole"
+    FISHEYE = "fisheye"
+    EQUIRECTANGULAR = "equirectangular"
+
+
+class StereoLayout(StrEnum):
+    NONE = "none"
+    SIDE_BY_SIDE = "side_by_side"
+    TOP_BOTTOM = "top_bottom"
+
+
+PROJECTIONS = tuple(Projection)
+STEREO_LAYOUTS = tuple(StereoLayout)
 
 
 @dataclass(frozen=True)
 class Camera:
-    position: Vector3 = (0.0, -5.0, 2.0)
-    target: Vector3 = (0.0, 0.0, 0.0)
-    up: Vector3 = (0.0, 0.0, 1.0)
-    fov: float = 45.0
-    aperture: float = 0.0
-    focus: float | None = None
-    projection: str = "pinhole"      # PROJECTIONS
-    fisheye_fov: float = 180.0       # a fisheye's angle across the image height, degrees
-    stereo: str = "none"             # STEREO_LAYOUTS: where the two eyes' images go
-    eye_separation: float = 0.065    # distance between the eyes of a stereo camera
+    position: Vector3 = key((0.0, -5.0, 2.0), Type.VEC3)
+    target: Vector3 = key((0.0, 0.0, 0.0), Type.VEC3)
+    up: Vector3 = key((0.0, 0.0, 1.0), Type.VEC3, NONZERO)
+    fov: float = key(45.0, Type.NUMBER, above(0), below(180))
+    aperture: float = key(0.0, Type.NUMBER, at_least(0))
+    focus: float | None = key(None, Type.NUMBER, above(0))
+    projection: Projection = key(Projection.PINHOLE, Type.WORD, words=Projection)
+    # a fisheye's angle across the image height, degrees
+    fisheye_fov: float = key(180.0, Type.NUMBER, above(0), at_most(360))
+    # where the two eyes' images go
+    stereo: StereoLayout = key(StereoLayout.NONE, Type.WORD, words=StereoLayout)
+    # distance between the eyes of a stereo camera
+    eye_separation: float = key(0.065, Type.NUMBER, at_least(0))
+
+    def aim_problem(self, keys_quoted: bool = False) -> tuple[str, str] | None:
+        """(the key at fault, what is wrong) where the camera cannot aim:
+        its target is its position, or its up lies along the view
+        (`keys_quoted`: the message quotes the keys, as the API's do)."""
+        forward = [t - p for t, p in zip(self.target, self.position)]
+        if _norm(forward) == 0:
+            target, position = ("'target'", "'position'") if keys_quoted else ("target", "position")
+            return "target", f"the camera's {target} is its {position}: it looks nowhere"
+        if _norm(_cross(forward, self.up)) <= 1e-9 * _norm(forward) * _norm(self.up):
+            return "up", "the camera's 'up' is parallel to its view direction (target - position)"
+        return None
+
+    def aimed(self, up_given: bool, keys_quoted: bool = False) -> "Camera":
+        """The camera as checked: looking straight along the default up
+        (not given), y is up instead; ValueError where it cannot aim."""
+        problem = self.aim_problem(keys_quoted)
+        if problem is None:
+            return self
+        if problem[0] == "up" and not up_given:
+            return replace(self, up=(0.0, 1.0, 0.0))
+        raise ValueError(problem[1])
+
+
+CAMERA_KEYS = keys_of(Camera)
+
+
+def _norm(v) -> float:
+    return math.sqrt(sum(x * x for x in v))
+
+
+def _cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+class LightKind(StrEnum):
+    DIRECTIONAL = "directional"
+    POINT = "point"
+    SPOT = "spot"
+    SPHERE = "sphere"
+    RECTANGLE = "rectangle"
+
+
+class Shadows(StrEnum):
+    NONE = "none"
+    HARD = "hard"
+    SOFT = "soft"
 
 
 def light_vector_key(kind: str) -> str:
     """The key of a light block that `Light.vector` holds: the way a
     directional light travels, any other light's position."""
-    return "direction" if kind == "directional" else "position"
+    return "direction" if kind == LightKind.DIRECTIONAL else "position"
 
 
 @dataclass(frozen=True)
 class Light:
-    kind: str                   # directional | point | spot
+    kind: LightKind
     vector: Vector3             # direction the light travels, or position
-    color: Vector3 = (1.0, 1.0, 1.0)
-    intensity: float = 1.0
-    shadows: str = "hard"       # none | hard | soft
-    softness: float = 16.0
-    direction: Vector3 = (0.0, 0.0, -1.0)   # spot: the cone's axis, the way it points
-    angle: float = 30.0         # spot: full brightness within this angle of the axis, degrees
-    falloff: float = 10.0       # spot: then fading to none over this many degrees more
-    radius: float = 0.25        # sphere: the light's radius
-    width: float = 1.0          # rectangle: its size along `right` ...
-    height: float = 1.0         # ... and along `up` (rectangle_edges)
+    color: Vector3 = key((1.0, 1.0, 1.0), Type.VEC3, at_least(0))
+    intensity: float = key(1.0, Type.NUMBER, at_least(0))
+    shadows: Shadows = key(Shadows.HARD, Type.WORD, words=Shadows)
+    softness: float = key(16.0, Type.NUMBER, above(0))
+    # spot: the cone's axis, the way it points
+    direction: Vector3 = key((0.0, 0.0, -1.0), Type.VEC3, NONZERO)
+    # spot: full brightness within this angle of the axis, degrees ...
+    angle: float = key(30.0, Type.NUMBER, above(0), below(180))
+    # ... then fading to none over this many degrees more
+    falloff: float = key(10.0, Type.NUMBER, at_least(0), at_most(180))
+    radius: float = key(0.25, Type.NUMBER, above(0))    # sphere: the light's radius
+    width: float = key(1.0, Type.NUMBER, above(0))      # rectangle: its size along `right` ...
+    height: float = key(1.0, Type.NUMBER, above(0))     # ... and along `up` (rectangle_edges)
 
     def key_value(self, key: str):
         """The value of the light block's key `key`, as checked."""
@@ -202,26 +300,42 @@ class Light:
         return math.cos(inner), math.cos(min(inner + math.radians(self.falloff), math.pi))
 
 
+# A light block's keys by kind, in the order messages list them: the
+# Light's fields, a position (Light.vector) and, for an aimed light, a
+# target instead of its direction.
+_LIGHT_PLACE = (Parameter("position", Type.VEC3), Parameter("target", Type.VEC3))
+_LIGHT_COMMON = ("color", "intensity", "shadows", "softness")
+_LIGHT_KEY_NAMES = {
+    LightKind.DIRECTIONAL: ("direction", *_LIGHT_COMMON),
+    LightKind.POINT: ("position", *_LIGHT_COMMON),
+    LightKind.SPOT: ("position", "direction", "target", *_LIGHT_COMMON, "angle", "falloff"),
+    LightKind.SPHERE: ("position", "radius", *_LIGHT_COMMON),
+    LightKind.RECTANGLE: ("position", "direction", "target", "width", "height", *_LIGHT_COMMON),
+}
+_ALL_LIGHT_KEYS = keys_of(Light, *_LIGHT_PLACE)
+LIGHT_KEYS = {kind: {name: _ALL_LIGHT_KEYS[name] for name in names} for kind, names in _LIGHT_KEY_NAMES.items()}
+
+
 @dataclass(frozen=True)
 class Glow:
     """Light around the surface for rays that miss: strength * exp(-closest / radius)."""
-    color: Vector3 = (1.0, 0.8, 0.5)
-    strength: float = 1.0
-    radius: float = 0.1
+    color: Vector3 = key((1.0, 0.8, 0.5), Type.VEC3, at_least(0))
+    strength: float = key(1.0, Type.NUMBER, at_least(0))
+    radius: float = key(0.1, Type.NUMBER, above(0))
 
 
 @dataclass(frozen=True)
 class Fog:
     """Exponential distance fog: colour mixes toward `color` by 1 - exp(-density t)."""
-    color: Vector3 = (0.5, 0.6, 0.7)
-    density: float = 0.1
+    color: Vector3 = key((0.5, 0.6, 0.7), Type.VEC3, at_least(0))
+    density: float = key(0.1, Type.NUMBER, at_least(0))
 
 
 @dataclass(frozen=True)
 class Slice:
     """Cuts away the part of the scene where dot(p, normalize(normal)) > offset."""
-    normal: Vector3 = (0.0, -1.0, 0.0)
-    offset: float = 0.0
+    normal: Vector3 = key((0.0, -1.0, 0.0), Type.VEC3, NONZERO)
+    offset: float = key(0.0, Type.NUMBER)
 
 
 @dataclass(frozen=True)
@@ -229,42 +343,94 @@ class Environment:
     """The path tracer's sky: radiance `horizon` at the horizon, blending
     linearly with the height of the direction to `zenith` straight up and
     `ground` straight down, times `intensity`."""
-    zenith: Vector3 = (0.35, 0.5, 0.9)
-    horizon: Vector3 = (0.9, 0.9, 0.95)
-    ground: Vector3 = (0.3, 0.27, 0.25)
-    intensity: float = 1.0
-    map: str | None = None    # the file's `map`: the checker moves it to RenderSettings.environment_map
+    zenith: Vector3 = key((0.35, 0.5, 0.9), Type.VEC3, at_least(0))
+    horizon: Vector3 = key((0.9, 0.9, 0.95), Type.VEC3, at_least(0))
+    ground: Vector3 = key((0.3, 0.27, 0.25), Type.VEC3, at_least(0))
+    intensity: float = key(1.0, Type.NUMBER, at_least(0))
+    # the file's `map`: the checker moves it to RenderSettings.environment_map
+    map: str | None = key(None, Type.FILE)
+
+
+class Precision(StrEnum):
+    FLOAT = "float"
+    DOUBLE = "double"
+
+
+class AoMethod(StrEnum):
+    NORMAL = "normal"       # sample along the normal
+    STEPS = "steps"         # from the step count
+
+
+class Switch(StrEnum):
+    ON = "on"
+    OFF = "off"
+
+
+class Normals(StrEnum):
+    """Finite differences of the estimate: tetrahedral (4 evaluations), central (6) or forward (4)."""
+    TETRAHEDRAL = "tetrahedral"
+    CENTRAL = "central"
+    FORWARD = "forward"
+
+
+class FastMath(StrEnum):
+    """on: native_ transcendental functions; auto: on CPUs."""
+    AUTO = "auto"
+    ON = "on"
+    OFF = "off"
+
+
+class Integrator(StrEnum):
+    DIRECT = "direct"       # Blinn-Phong and the effects
+    PATH = "path"           # Monte Carlo path tracing
+
+
+# The hit threshold's largest multiple: normals are differences over that
+# step, which beyond it can pass float's range on the scene (NaN normals).
+MAX_EPSILON_SCALE = 1000
 
 
 @dataclass(frozen=True)
 class RenderSettings:
-    width: int = 640
-    height: int = 480
-    max_steps: int = 256
-    max_distance: float = 50.0
-    epsilon: float | str = "pixel"   # a number, or "pixel"
-    ao: float = 0.0
-    samples: int = 1
-    background: Vector3 | str = (0.05, 0.05, 0.08)   # or "transparent"
-    precision: str = "float"
-    reflections: int = 0
-    glow: Glow | None = None
-    fog: Fog | None = None
-    slice: Slice | None = None
-    ao_method: str = "normal"        # normal: sample along the normal; steps: from the step count
-    dither: float = 1.0              # random fraction of the first step, against banding
-    overrelax: float = 1.3           # over-relaxation factor of sphere tracing (1 = plain)
-    cone_marching: str = "on"        # march a work-item's packet of camera rays as one cone first (CPU lanes)
-    epsilon_scale: float = 1.0       # multiplies the hit threshold (a quality knob)
-    normals: str = "tetrahedral"     # finite differences: tetrahedral (4 evaluations) or central (6)
-    fast_math: str = "auto"          # on: native_ transcendental functions; auto: on CPUs
-    exposure: float = 0.0            # stops: PNG colour times 2^exposure (EXR stays as rendered)
-    tonemap: str = DEFAULT_TONE_CURVE   # PNG tone curve: soft (a shoulder above 0.8) | none (clip) | reinhard | aces
-    integrator: str = "direct"       # direct: Blinn-Phong and the effects; path: Monte Carlo path tracing
-    bounces: int = 4                 # path: the most surface scatterings of a path
-    environment: Environment | None = None   # path: the sky; None: the background everywhere
+    """A render block's keys (`runtime`: kernel arguments, changed without
+    a rebuild; exposure and tonemap only PNG writing reads)."""
+    width: int = key(640, Type.WHOLE, at_least(1), at_most(65536), runtime=True)
+    height: int = key(480, Type.WHOLE, at_least(1), at_most(65536), runtime=True)
+    max_steps: int = key(256, Type.WHOLE, between(1, 100000))
+    max_distance: float = key(50.0, Type.NUMBER, above(0))
+    epsilon: float | str = key("pixel", Type.NUMBER, above(0), words=("pixel",))   # a number, or "pixel"
+    ao: float = key(0.0, Type.NUMBER, between(0, 1))
+    samples: int = key(1, Type.WHOLE, at_least(1), at_most(4096), runtime=True)
+    background: Vector3 | str = key((0.05, 0.05, 0.08), Type.VEC3, at_least(0), words=("transparent",))
+    precision: Precision = key(Precision.FLOAT, Type.WORD, words=Precision)
+    reflections: int = key(0, Type.WHOLE, between(0, 16))
+    glow: Glow | None = key(None, Type.BLOCK, block=Glow)
+    fog: Fog | None = key(None, Type.BLOCK, block=Fog)
+    slice: Slice | None = key(None, Type.BLOCK, block=Slice)
+    ao_method: AoMethod = key(AoMethod.NORMAL, Type.WORD, words=AoMethod)
+    # random fraction of the first step, against banding
+    dither: float = key(1.0, Type.NUMBER, between(0, 1))
+    # over-relaxation factor of sphere tracing (1 = plain)
+    overrelax: float = key(1.3, Type.NUMBER, between(1, 1.99))
+    # march a work-item's packet of camera rays as one cone first (CPU lanes)
+    cone_marching: Switch = key(Switch.ON, Type.WORD, words=Switch)
+    # multiplies the hit threshold (a quality knob)
+    epsilon_scale: float = key(1.0, Type.NUMBER, above(0), at_most(MAX_EPSILON_SCALE))
+    normals: Normals = key(Normals.TETRAHEDRAL, Type.WORD, words=Normals)
+    fast_math: FastMath = key(FastMath.AUTO, Type.WORD, words=FastMath)
+    # stops: PNG colour times 2^exposure (EXR stays as rendered)
+    exposure: float = key(0.0, Type.NUMBER, between(-20, 20), runtime=True)
+    # PNG tone curve: soft (a shoulder above 0.8) | none (clip) | reinhard | aces
+    tonemap: str = key(DEFAULT_TONE_CURVE, Type.WORD, words=TONE_CURVES, runtime=True)
+    integrator: Integrator = key(Integrator.DIRECT, Type.WORD, words=Integrator)
+    bounces: int = key(4, Type.WHOLE, between(1, 64))       # path: the most surface scatterings of a path
+    # path: the sky; None: the background everywhere
+    environment: Environment | None = key(None, Type.BLOCK, block=Environment)
     environment_map: str | None = None       # an equirectangular image, the sky instead; not a file key
     aovs: tuple[str, ...] = ()       # passes beyond the default channels (run.PASSES); not a file key
+
+
+RENDER_KEYS = keys_of(RenderSettings)
 
 
 @dataclass(frozen=True)

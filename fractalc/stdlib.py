@@ -21,10 +21,12 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, replace
+from enum import StrEnum
 from functools import lru_cache
 from string import Template
 
 from .resources import resource_dir
+from .types import NONZERO, Parameter, Type, above, at_least, between, parse_constraint
 
 PRELUDE = "prelude.cl"
 DISTANCE_KERNEL = "distance.cl"
@@ -50,14 +52,6 @@ ENGINE = (
     "trace",         # the colour seen along a ray, effects included
     "render",        # the `render` kernel: samples, then the channels and passes
 )
-
-
-@dataclass(frozen=True)
-class Parameter:
-    name: str
-    type: str                      # num | int | vec3 | vec4 | size | shape | material | rgb
-    default: float | tuple | None  # None: required
-    constraints: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -110,12 +104,16 @@ def _parse_value(text: str) -> float | tuple:
     return float(text)
 
 
+# A `//:` line's type names: `num` is a number
+_ANNOTATION_TYPES = {"num": Type.NUMBER, **{t.value: t for t in (Type.WHOLE, Type.VEC3, Type.VEC4, Type.SIZE)}}
+
+
 def _parse_parameter(text: str) -> Parameter:
     name, rest = (s.strip() for s in text.split(":", 1))
     match = re.match(r"(\w+)\s*(?:=\s*(\([^)]*\)|[-+.\deE]+))?\s*(.*)$", rest)
     type_, default, constraints = match.groups()
-    return Parameter(name, type_, _parse_value(default) if default else None,
-                     tuple(constraints.split()))
+    return Parameter(name, _ANNOTATION_TYPES[type_], _parse_value(default) if default else None,
+                     tuple(parse_constraint(c) for c in constraints.split()))
 
 
 def _parameter_types(source: str) -> tuple[str, ...]:
@@ -252,28 +250,26 @@ def templates(file_name: str) -> dict[str, Template]:
 
 # ---- language forms that are not library functions -------------------------
 
-def _p(name, type_, default=None, *constraints):
-    return Parameter(name, type_, default, tuple(constraints))
+def _p(name, type_, default=None, *constraints, words=()):
+    return Parameter(name, type_, default, tuple(constraints), tuple(words))
 
 
-COMBINATORS = {
-    "union": Signature("combinator", "union", (_p("smooth", "num", 0.0, ">=0"),)),
-    "intersect": Signature("combinator", "intersect", (_p("smooth", "num", 0.0, ">=0"),)),
-    "subtract": Signature("combinator", "subtract", (_p("smooth", "num", 0.0, ">=0"),)),
-}
+_SMOOTH = (_p("smooth", Type.NUMBER, 0.0, at_least(0)),)
+COMBINATORS = {name: Signature("combinator", name, _SMOOTH) for name in ("union", "intersect", "subtract")}
 
 TRANSFORMS = {
-    "translate": Signature("transform", "translate", (_p("offset", "vec3"),)),
-    "rotate": Signature("transform", "rotate", (_p("axis", "vec3", None, "nonzero"), _p("degrees", "num"))),
-    "scale": Signature("transform", "scale", (_p("factor", "num", None, ">0"),)),
-    "repeat": Signature("transform", "repeat", (_p("period", "size", None, ">=0"),)),
-    "round": Signature("transform", "round", (_p("radius", "num", None, ">=0"),)),
-    "onion": Signature("transform", "onion", (_p("thickness", "num", None, ">0"),)),
-    "twist": Signature("transform", "twist", (_p("rate", "num"),)),
-    "bend": Signature("transform", "bend", (_p("rate", "num"),)),
-    "material": Signature("transform", "material", (_p("material", "material"),)),
-    "color": Signature("transform", "color", (_p("rgb", "color", None, "0..1000"),)),
+    "translate": Signature("transform", "translate", (_p("offset", Type.VEC3),)),
+    "rotate": Signature("transform", "rotate", (_p("axis", Type.VEC3, None, NONZERO), _p("degrees", Type.NUMBER))),
+    "scale": Signature("transform", "scale", (_p("factor", Type.NUMBER, None, above(0)),)),
+    "repeat": Signature("transform", "repeat", (_p("period", Type.SIZE, None, at_least(0)),)),
+    "round": Signature("transform", "round", (_p("radius", Type.NUMBER, None, at_least(0)),)),
+    "onion": Signature("transform", "onion", (_p("thickness", Type.NUMBER, None, above(0)),)),
+    "twist": Signature("transform", "twist", (_p("rate", Type.NUMBER),)),
+    "bend": Signature("transform", "bend", (_p("rate", Type.NUMBER),)),
+    "material": Signature("transform", "material", (_p("material", Type.MATERIAL),)),
+    "color": Signature("transform", "color", (_p("rgb", Type.COLOR, None, between(0, 1000)),)),
 }
+
 
 # `.color(orbit_trap(...))`: a fractal coloured by how near its orbit comes
 # to the origin or the coordinate planes (Syntopia part II), from `near`
@@ -281,29 +277,60 @@ TRANSFORMS = {
 # spread over the trap's range: fractalc/lower.py); or by the steps
 # its orbit took (`iterations`), or where the point is (`radius` |p|,
 # `height` p.z).
-TRAP_KINDS = ("origin", "x", "y", "z", "planes", "iterations", "radius", "height")
-_TRAP_WORDS = "word:" + "|".join(TRAP_KINDS)
+class TrapKind(StrEnum):
+    ORIGIN = "origin"
+    X = "x"
+    Y = "y"
+    Z = "z"
+    PLANES = "planes"
+    ITERATIONS = "iterations"
+    RADIUS = "radius"
+    HEIGHT = "height"
+
+
+TRAP_KINDS = tuple(TrapKind)
 # `scale`'s default: spread the trap over its range (fractalc/lower.py, `_trap_parameter`)
 AUTO_SCALE = "auto"
+_TRAP = _p("trap", Type.WORD, TrapKind.PLANES, words=TrapKind)
+_TRAP_SCALE = _p("scale", Type.NUMBER, AUTO_SCALE, above(0))
 COLORINGS = {
     "orbit_trap": Signature("coloring", "orbit_trap", (
-        _p("near", "vec3", (1.0, 0.85, 0.55), "0..1000"), _p("far", "vec3", (0.15, 0.25, 0.6), "0..1000"),
-        _p("trap", _TRAP_WORDS, "planes"), _p("scale", "num", AUTO_SCALE, ">0"))),
+        _p("near", Type.VEC3, (1.0, 0.85, 0.55), between(0, 1000)),
+        _p("far", Type.VEC3, (0.15, 0.25, 0.6), between(0, 1000)), _TRAP, _TRAP_SCALE)),
     # Quilez's cosine palette a + b cos(2 pi (c t + d)) of t = trap * scale
     "palette": Signature("coloring", "palette", (
-        _p("a", "vec3", (0.5, 0.5, 0.5)), _p("b", "vec3", (0.5, 0.5, 0.5)), _p("c", "vec3", (1.0, 1.0, 1.0)),
-        _p("d", "vec3", (0.0, 0.33, 0.67)), _p("trap", _TRAP_WORDS, "planes"),
-        _p("scale", "num", AUTO_SCALE, ">0"))),
+        _p("a", Type.VEC3, (0.5, 0.5, 0.5)), _p("b", Type.VEC3, (0.5, 0.5, 0.5)), _p("c", Type.VEC3, (1.0, 1.0, 1.0)),
+        _p("d", Type.VEC3, (0.0, 0.33, 0.67)), _TRAP, _TRAP_SCALE)),
 }
 
-# math function -> (arity, how arguments combine): "map" applies per
-# component (numbers broadcast), the others take and give what they say.
+
+@dataclass(frozen=True)
+class MathFunction:
+    """A math function of scenes and formulas alike: its arguments' kinds
+    (`any` a number or vector, per component with numbers broadcast; `v`
+    a vector, all of one size; `3` a 3-vector), what a message shows of
+    it, and whether it has a derivative (floor and round have none)."""
+    arguments: tuple[str, ...]
+    about: str
+    derivable: bool = True
+
+    @property
+    def per_component(self) -> bool:
+        return all(a == "any" for a in self.arguments)
+
+
 MATH = {
-    **{name: (1, "map") for name in
-       ("sin", "cos", "tan", "asin", "acos", "atan", "sqrt", "abs", "exp", "log",
-        "floor", "radians", "degrees")},
-    "atan2": (2, "map"), "min": (2, "map"), "max": (2, "map"), "pow": (2, "map"),
-    "clamp": (3, "map"), "mix": (3, "map"),
-    "length": (1, "vector->num"), "normalize": (1, "vector->vector"),
-    "dot": (2, "vector,vector->num"), "cross": (2, "vec3,vec3->vec3"),
+    **{name: MathFunction(("any",), f"{name}(x)") for name in
+       ("sin", "cos", "tan", "asin", "acos", "atan", "sqrt", "rsqrt", "abs", "exp", "log", "radians", "degrees")},
+    **{name: MathFunction(("any",), f"{name}(x)", derivable=False) for name in ("floor", "round")},
+    "atan2": MathFunction(("any", "any"), "atan2(y, x)"),
+    "min": MathFunction(("any", "any"), "min(a, b)"),
+    "max": MathFunction(("any", "any"), "max(a, b)"),
+    "pow": MathFunction(("any", "any"), "pow(x, y)"),
+    "clamp": MathFunction(("any", "any", "any"), "clamp(x, low, high)"),
+    "mix": MathFunction(("any", "any", "any"), "mix(a, b, t)"),
+    "length": MathFunction(("v",), "length(v)"),
+    "dot": MathFunction(("v", "v"), "dot(a, b)"),
+    "cross": MathFunction(("3", "3"), "cross(a, b)"),
+    "normalize": MathFunction(("v",), "normalize(v)"),
 }

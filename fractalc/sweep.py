@@ -104,7 +104,8 @@ def parse_changes(items: list[str]) -> list[dict]:
     """`KNOB=V1,V2` items (from --vary) as one-knob changes; ValueError
     saying what is wrong."""
     from .arguments import parse_number
-    from .check import RENDER_KEYS, check_value
+    from .check import check_value
+    from .program import RENDER_KEYS
     changes = []
     for item in items:
         knob, sep, values = item.partition("=")

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import fractalc
-from fractalc import build as build_module, formula_code, ir
+from fractalc import build as build_module, formula_code, formula_statements, ir
 from fractalc.check import library_formulas
 from fractalc.errors import SceneError
 from fractalc.parse import parse
@@ -110,7 +110,7 @@ def test_statements_parse_by_phase_with_else_if():
     program = parse("formula f(s = 2 in [1, 3]) {\n    init k = 1\n    if z.x < 0 { z = -z } else if z.y < 0 {\n"
                     "        z = z * s\n    } else { k = k * 2 }\n    z = z + c\n    final distance = length(z) / k\n}\n"
                     "scene fractal(f())")
-    formula = formula_code.split(program.decls[0])
+    formula = formula_statements.split(program.decls[0])
     assert [s.name for s in formula.init] == ["k"] and [s.name for s in formula.final] == ["distance"]
     branch = formula.step[0]
     assert branch.otherwise[0].then[0].name == "z" and branch.otherwise[0].otherwise[0].name == "k"

@@ -20,6 +20,7 @@ import reference_formulas as ref
 from fractalc import ast, check, formula_code, ir
 from fractalc.emit import double_literals, function_source
 from fractalc.parse import parse
+from fractalc.types import Type
 
 POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
 # 95th percentile of the relative error; float: measured at most 4.0e-5
@@ -109,7 +110,7 @@ def _layout(case: Case):
         formula, signature = library[name]
         args = []
         for p in signature.parameters:
-            width = 1 if p.type == "num" else len(p.default)
+            width = 1 if p.type is Type.NUMBER else len(p.default)
             params = tuple(ir.Param(index + k, f"{name}_{p.name}{k}") for k in range(width))
             args.append(params[0] if width == 1 else ir.Vec(params))
             index += width
@@ -298,7 +299,7 @@ def _range_ends(case: Case):
     for k, (name, _) in enumerate(case.uses):
         for p in library[name][1].parameters:
             if p.constraints:
-                low, high = (float(x) for x in p.constraints[0].split(".."))
+                low, high = p.constraints[0].low, p.constraints[0].high
                 ends[0][(k, p.name)], ends[1][(k, p.name)] = low, high
     return [param_values(case)] + [param_values(case, e) for e in ends]
 

@@ -196,7 +196,7 @@ def test_lets_that_double_the_scene_each_time_are_a_located_error(tmp_path, caps
 def test_a_union_too_large_to_compile_is_refused_at_the_shape_that_passes_the_limit(tmp_path, capsys):
     """Item 4: 2999 translated spheres (5999 parts) check; the 3000th is
     refused where it stands, saying why and what to use instead."""
-    from fractalc.check import MAX_SHAPES
+    from fractalc.check_expressions import MAX_SHAPES
     shapes = [f"sphere(0.05).translate(({i}, 0, 0))" for i in range((MAX_SHAPES - 1) // 2 + 1)]
     fractalc.loads(f"scene union({', '.join(shapes[:-1])})")
     text = f"scene union({', '.join(shapes)})\n"
@@ -352,7 +352,7 @@ def test_many_unknown_names_get_few_suggestions(monkeypatch):
     the first errors get one, so 1000 unknown names cost linear time."""
     import difflib
 
-    from fractalc import check
+    from fractalc import check_base
     calls = []
     original = difflib.get_close_matches
     monkeypatch.setattr(difflib, "get_close_matches", lambda *a, **k: calls.append(a[0]) or original(*a, **k))
@@ -360,7 +360,7 @@ def test_many_unknown_names_get_few_suggestions(monkeypatch):
     with pytest.raises(fractalc.SceneError) as error:
         fractalc.loads(text)
     messages = [d.message for d in error.value.errors]
-    assert len(messages) == 1000 and len(calls) == check.SUGGESTED_ERRORS
+    assert len(messages) == 1000 and len(calls) == check_base.SUGGESTED_ERRORS
     assert messages[0] == "unknown name 'valu_0' (did you mean 'value_0'?)"
     assert messages[-1] == "unknown name 'valu_999'"
 
@@ -548,7 +548,7 @@ def test_options_out_of_range_as_reported(argv, refused, tmp_path, capsys):
 def test_a_hybrid_past_its_steps_is_refused_where_it_passes_them():
     """1000 entries with iterations 1000 checked in 0.7 s and then built
     for 84 s: refused at the 257th step, as MAX_SHAPES refuses shapes."""
-    from fractalc.check import MAX_HYBRID_STEPS
+    from fractalc.check_formulas import MAX_HYBRID_STEPS
     steps = ["bulb()" if i % 2 == 0 else "amazing_box(scale: -1.5)" for i in range(1000)]
     text = f"scene fractal(hybrid({', '.join(steps)}), iterations: 1000, bound: 4)"
     with pytest.raises(fractalc.SceneError) as error:

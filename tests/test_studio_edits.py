@@ -9,7 +9,9 @@ from dataclasses import replace
 import pytest
 
 from fractalc.api import Camera
-from fractalc.check import CAMERA_KEYS, LIGHT_KEYS, MATERIAL_KEYS, RENDER_KEYS, KeyKind, check, key_specs
+from fractalc.check import check
+from fractalc.check_blocks import KeyKind, key_specs
+from fractalc.program import CAMERA_KEYS, LIGHT_KEYS, MATERIAL_KEYS, RENDER_KEYS
 from fractalc.parse import parse
 from fractalc.program import Keyframe
 from fractalc.studio import edits

@@ -1,12 +1,12 @@
 """What the page's controls show: the params from their declarations and
 the render, light and material keys from the language's own key specs
-(`check.key_specs`), each with its value in the checked scene."""
+(`check_blocks.key_specs`), each with its value in the checked scene."""
 from __future__ import annotations
 
 from dataclasses import fields, is_dataclass
 
 from .. import ast, ir
-from ..check import KeySpec, key_specs
+from ..check_blocks import KeySpec, key_specs
 from ..parse import parse
 from ..program import CheckedScene
 

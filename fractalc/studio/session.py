@@ -21,7 +21,8 @@ from typing import Callable
 
 from .. import ast
 from ..api import Camera, Scene
-from ..check import KeyKind, check, key_specs
+from ..check import check
+from ..check_blocks import KeyKind, key_specs
 from ..errors import RenderError, SceneError, Span
 from ..parse import parse
 from ..paths import camera_at, params_at
