@@ -1,7 +1,7 @@
 """`fractalc bench --count`: distance evaluations per pixel, by purpose.
 
-The counting build is the scene's kernel with the library's
-`#if FEATURE_COUNT` lines kept (emit.Target.count; normal kernels hold no
+The counting build is the scene's kernel with the engine's and library's
+`COUNT_` hooks kept (emit.Target.count; normal kernels hold no
 trace of them) and three edits to its text made here: `params` becomes a
 __global buffer, whose values are followed by a work-item's counters
 (stdlib_cl/count.cl, placed before the scene's functions), and each formula

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+import textwrap
 from dataclasses import dataclass
 
 from . import ir, pathtrace, ranges
@@ -19,18 +20,14 @@ from .hoist import DERIVED_SLOTS, Hoisted, hoist
 from .lower import POINT, SceneIR
 from .types import FLOAT_MAX
 from .schedule import ForBlock, Hoist, IfBlock, schedule, varying
-from .passes import PASSES, channels
+from .passes import PASSES, SHADING_PASSES, channels
+from .lights import LIGHT_KINDS, MAX_RADIANCE
 from .program import Light
-from .stdlib import library
+from .stdlib import library, templates
 from .version import __version__
 
 AMBIENT = 0.25          # ambient light, times the material's colour and AO
 AO_DELTA = 0.05         # spacing of the AO samples along the normal
-# A light's radiance, and a point light's inverse-square factor, are capped so
-# that sums of lights, their reflections and fog stay finite in float (no
-# inf, no inf * 0 = NaN under a shadow) however bright the scene makes them
-MAX_RADIANCE = 1e20
-MAX_INVERSE_SQUARE = 1e8
 
 
 @dataclass(frozen=True)
@@ -38,7 +35,7 @@ class Target:
     lanes: int = 8          # rays per work-item: 1 (GPU) or 8/16 (CPU vector lanes)
     double: bool = False    # `real` is double
     exact_native: bool = False  # the device's native_ functions are exact (lanes.LaneChoice.native_exact)
-    count: bool = False     # the counting build's `#if FEATURE_COUNT` lines (fractalc/count.py)
+    count: bool = False     # the counting build's hooks kept (stdlib_cl/count.cl, fractalc/count.py)
 
 
 def literal(value: float) -> str:
@@ -282,18 +279,26 @@ def _vector(v) -> str:
     return f"v3({', '.join(literal(x) for x in v)})"
 
 
+def _scene_template(name: str, **values) -> str:
+    return templates("scene.cl")[name].substitute(values)
+
+
+def _shade_template(name: str, **values) -> str:
+    return templates("shade.cl")[name].substitute(values)
+
+
+def _body(lines) -> str:
+    """Statements for a template's `$body`: each line ending in a newline."""
+    return "".join(f"{line}\n" for line in lines)
+
+
 def _surface_function(scene_ir: SceneIR) -> str:
     """The surface properties at a point: the nearest part's material."""
     fields = [f.name for f in dataclasses.fields(scene_ir.surface)]
     writer = _FunctionWriter(ir.Vec(scene_ir.surface.items()))
     writer.block(writer.root, "    ")
     values = ", ".join(writer.argument(x) for x in scene_ir.surface.items())
-    return "\n".join([
-        "typedef struct { real " + ", ".join(fields) + "; } surface;", "",
-        "surface surface_at(vec3 p, __constant scalar *params) {",
-        *writer.lines,
-        f"    surface s = {{ {values} }};",
-        "    return s;", "}"])
+    return _scene_template("surface_at", fields=", ".join(fields), body=_body(writer.lines), values=values)
 
 
 def _half_space_expressions(half_spaces) -> tuple[ir.Expr, ...]:
@@ -314,79 +319,51 @@ def _bound_function(scene_ir: SceneIR, with_half_spaces: bool) -> str:
     writer = _FunctionWriter(ir.Vec(tuple(centre) + (radius,)))
     writer.block(writer.root, "    ")
     x, y, z, r = (writer.argument(e) for e in tuple(centre) + (radius,))
-    lines = ["real scene_bound(__constant scalar *params, vec3 *centre) {", *writer.lines,
-             f"    *centre = v3({x}, {y}, {z});", f"    return {r};", "}"]
+    text = _scene_template("scene_bound", body=_body(writer.lines), x=x, y=y, z=z, radius=r)
     if half_spaces and with_half_spaces:
         writer = _FunctionWriter(ir.Vec(_half_space_expressions(half_spaces)))
         writer.block(writer.root, "    ")
-        lines += ["",
-                  "// Whether rays from `origin` along `dir` stay clear of every ground half-space",
-                  "// n.p <= offset: they start above it (by `height`) and move away from it.",
-                  "mask clear_of_half_spaces(vec3 origin, vec3 dir, real height, __constant scalar *params) {",
-                  *writer.lines, "    mask clear = MASK_TRUE;"]
-        for normal, offset in half_spaces:
-            n = ", ".join(writer.argument(c) for c in normal)
-            lines += [f"    {{   vec3 n = v3({n});",
-                      f"        clear = clear & (v3_dot(origin, n) - {writer.argument(offset)} >= height)"
-                      " & (v3_dot(dir, n) >= 0.0f);   }"]
-        lines += ["    return clear;", "}"]
-    return "\n".join(lines)
+        tests = [_scene_template("half_space_test", normal=", ".join(writer.argument(c) for c in normal),
+                                 offset=writer.argument(offset)) for normal, offset in half_spaces]
+        text += "\n\n" + _scene_template("clear_of_half_spaces", body=_body(writer.lines), tests=_body(tests))
+    return text
+
+
+def _filled(template: str, values: dict) -> str:
+    """A template of shade.cl with numbers as literals and vectors as v3s."""
+    return _shade_template(template, **{name: _vector(v) if isinstance(v, tuple) else literal(v)
+                                        for name, v in values.items()})
 
 
 def _light_block(index: int, light: Light, bound, transparent: bool, passes: bool) -> tuple[str, set[str]]:
-    radiance = _vector(tuple(min(c * light.intensity, MAX_RADIANCE) for c in light.color))
-    lines = [f"    {{   // light {index}: {light.kind}, shadows {light.shadows}"]
-    if light.kind == "directional":
-        length = sum(c * c for c in light.vector) ** 0.5
-        to_light = tuple(-c / length for c in light.vector)
-        lines += [f"        vec3 to_light = {_vector(to_light)};",
-                  "        real reach = (real)MAX_DISTANCE;",
-                  f"        vec3 radiance = {radiance};"]
-    else:
-        lines += [f"        vec3 offset = v3_sub({_vector(light.vector)}, p);",
-                  "        real reach = v3_length(offset);",
-                  "        vec3 to_light = v3_scale(offset, 1.0f / reach);",
-                  f"        vec3 radiance = v3_scale({radiance}, "
-                  f"fmin(1.0f / (reach * reach), {literal(MAX_INVERSE_SQUARE)}));"]
-    if light.kind == "spot":
-        lines += _spot_lines(light, "radiance", "to_light", "        ")
-    if light.kind == "rectangle":    # lights one side: the cosine at the light
-        length = sum(c * c for c in light.direction) ** 0.5
-        facing = _vector(tuple(c / length for c in light.direction))
-        lines.append(f"        radiance = v3_scale(radiance, max(-v3_dot(to_light, {facing}), 0.0f));")
+    kind = LIGHT_KINDS[light.kind]
+    radiance = tuple(min(c * light.intensity, MAX_RADIANCE) for c in light.color)
+    origin, values = kind.origin(light)
+    lines = [_shade_template("light_start", index=index, kind=light.kind, shadows=light.shadows),
+             _filled(origin, {**values, "radiance": radiance}),
+             *(_filled(*shaping(light)) for shaping in kind.shaping)]
     needs = set()
     widened = _shadow_bound_radius(light)
     if bound is not None and widened is not None:
-        # (two statements: C leaves the order of a call's arguments open) ...
-        lines += ["        real enter, leave;",
-                  f"        mask toward_bound = ray_sphere_span(lifted, to_light, bound_centre, {widened}, "
-                  "&enter, &leave);"]
-        bounded_reach = "SELECT((real)0.0f, fmin(reach, leave), toward_bound)"
-        if bound.half_spaces:
-            # ... unless it may meet a ground half-space
-            lines.append(f"        reach = SELECT(reach, {bounded_reach}, "
-                         "clear_of_half_spaces(lifted, to_light, threshold, params));")
-        else:
-            lines.append(f"        reach = {bounded_reach};")
+        lines.append(_shade_template("shadow_ray_bound", widened=widened))
+        lines.append(_shade_template("shadow_reach_bounded_unless_ground" if bound.half_spaces
+                                     else "shadow_reach_bounded"))
     if light.shadows != "none":
-        # a surface facing away from the light gets none of it (blinn_phong
-        # is 0 there): no shadow ray
-        lines.append("        mask facing = hit & (v3_dot(normal, to_light) > 0.0f);")
+        lines.append(_shade_template("shadow_facing"))
     if light.shadows == "hard":
         # through transparent solids where the scene has some
         function = "hard_shadow_through" if transparent else "hard_shadow"
-        lines.append(f"        real visible = {function}(lifted, to_light, reach, threshold, facing, params);")
+        lines.append(_shade_template("hard_shadow", function=function))
         needs.add(function)
     elif light.shadows == "soft":
-        lines.append(f"        real visible = soft_shadow(lifted, to_light, reach, threshold, "
-                     f"{literal(light.softness)}, facing, params);")
+        lines.append(_shade_template("soft_shadow", softness=literal(light.softness)))
         needs.add("soft_shadow")
     if light.shadows != "none":
-        lines.append("        radiance = v3_scale(radiance, visible);")
-    lines += _lit_lines("to_light", "radiance", passes, "        ")
+        lines.append(_shade_template("shadowed"))
+    lines.append(textwrap.indent(_lit("to_light", "radiance", passes), "    "))
     if passes and light.shadows != "none":
-        lines.append("        passes->shadow = passes->shadow + (1.0f - visible);")
-    lines.append("    }")
+        lines.append(_shade_template("shadow_pass"))
+    lines.append(_shade_template("light_end"))
     return "\n".join(lines), needs
 
 
@@ -400,38 +377,16 @@ def _shadow_bound_radius(light: Light) -> str | None:
     and d >= t - |o - c| - R, so k d / t >= 1 for every t once s is that
     wide (and past the widened sphere). With k <= 1 no width will do."""
     if light.shadows == "hard":
-        return "bound_radius + threshold"
+        return _shade_template("hard_widening")
     if light.shadows == "soft" and light.softness > 1.0:
-        return ("bound_radius + threshold + (v3_length(v3_sub(lifted, bound_centre)) + bound_radius) * "
-                f"{literal(1.0 / (light.softness - 1.0))}")
+        return _shade_template("soft_widening", factor=literal(1.0 / (light.softness - 1.0)))
     return None
 
 
-def _spot_lines(light: Light, radiance: str, to_light: str, indent: str) -> list[str]:
-    """A spot light's cone: `radiance` times smoothstep from the cone's
-    outer cosine to its inner one, of the angle between the light's axis
-    and the way the light goes to the point (docs/looks.md#spot-lights)."""
-    length = sum(c * c for c in light.direction) ** 0.5
-    axis = _vector(tuple(c / length for c in light.direction))
-    inner, outer = light.cone_cosines()
-    return [f"{indent}{radiance} = v3_scale({radiance}, smoothstep({literal(outer)}, "
-            f"{literal(max(inner, outer + 1e-6))}, -v3_dot({to_light}, {axis})));"]
-
-
-def _lit_lines(to_light: str, radiance: str, passes: bool, indent: str) -> list[str]:
-    """Add a light's Blinn-Phong term to `color`; with the shading passes,
-    its highlight (the term without albedo) to the specular pass and the
-    rest to the diffuse pass."""
-    def term(albedo):
-        return f"blinn_phong(normal, {to_light}, to_eye, {albedo}, s.specular, s.shininess, {radiance})"
-    if not passes:
-        return [f"{indent}color = v3_add(color, {term('albedo')});"]
-    return [f"{indent}{line}" for line in (
-        f"vec3 lit = {term('albedo')};",
-        f"vec3 highlight = {term('v3((real)0.0f, 0.0f, 0.0f)')};",
-        "passes->specular = v3_add(passes->specular, highlight);",
-        "passes->diffuse = v3_add(passes->diffuse, v3_sub(lit, highlight));",
-        "color = v3_add(color, lit);")]
+def _lit(to_light: str, radiance: str, passes: bool) -> str:
+    """Add a light's Blinn-Phong term to `color` (and with the shading
+    passes, to the diffuse and specular passes)."""
+    return _shade_template("lit_passes" if passes else "lit", to_light=to_light, radiance=radiance)
 
 
 def _shade_function(scene_ir: SceneIR, on: dict[str, bool]) -> tuple[str, list[str]]:
@@ -442,54 +397,39 @@ def _shade_function(scene_ir: SceneIR, on: dict[str, bool]) -> tuple[str, list[s
     # in, and `shade` is it with the passes thrown away (the compiler drops them)
     passes = on["SHADING_PASSES"]
     needs = {"blinn_phong"}
-    signature = "vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, real steps, mask hit,"
-    lines = [signature if not passes else signature.replace("shade(", "shade_passes("),
-             "           __constant scalar *params" + (", shading_passes *passes) {" if passes else ") {"),
-             "    surface s = surface_at(p, params);",
-             "    vec3 albedo = v3(s.red, s.green, s.blue);",
-             "    vec3 to_eye = v3(-dir.x, -dir.y, -dir.z);"]
+    lines = [_shade_template("passes_signature" if passes else "signature"), _shade_template("surface")]
     # an AO pass of a scene without AO shows the occlusion at full strength
-    strength = scene.render.ao if ao else 1.0
+    strength = literal(scene.render.ao if ao else 1.0)
     if (ao or on["PASS_AO"]) and scene.render.ao_method == "steps":
         needs.add("step_occlusion")
-        lines.append(f"    real occlusion = step_occlusion(steps, {literal(strength)});")
+        lines.append(_shade_template("step_occlusion", strength=strength))
     elif ao or on["PASS_AO"]:
         needs.add("ambient_occlusion")
-        lines.append(f"    real occlusion = ambient_occlusion(p, normal, {literal(AO_DELTA)}, "
-                     f"{literal(strength)}, params);")
+        lines.append(_shade_template("ambient_occlusion", delta=literal(AO_DELTA), strength=strength))
     sky_lit = pathtrace.lights_surfaces(scene.render)
     if sky_lit:     # the environment's diffuse light replaces the constant ambient light
         needs.add("environment_light")
-        ambient = "v3_scale(environment_light(normal), occlusion)" if ao else "environment_light(normal)"
-        lines.append(f"    vec3 color = v3_mul(albedo, {ambient});")
+        lines.append(_shade_template("ambient_environment_occluded" if ao else "ambient_environment"))
     else:
-        ambient = f"{literal(AMBIENT)} * occlusion" if ao else literal(AMBIENT)
-        lines.append(f"    vec3 color = v3_scale(albedo, {ambient});")
+        lines.append(_shade_template("ambient_occluded" if ao else "ambient", ambient=literal(AMBIENT)))
     if passes:
-        lines += ["    passes->diffuse = color;", "    passes->specular = v3((real)0.0f, 0.0f, 0.0f);",
-                  "    passes->shadow = 0.0f;",
-                  "    passes->occlusion = " + ("occlusion;" if ao or on["PASS_AO"] else "1.0f;")]
+        lines.append(_shade_template("passes_start",
+                                     occlusion="occlusion" if ao or on["PASS_AO"] else literal(1.0)))
     if any(light.shadows != "none" for light in scene.lights):
-        lines.append("    vec3 lifted = v3_add(p, v3_scale(normal, 2.0f * threshold));")
+        lines.append(_shade_template("shadow_start"))
         if scene_ir.bound is not None:
-            lines += ["    vec3 bound_centre;", "    real bound_radius = scene_bound(params, &bound_centre);"]
+            lines.append(_shade_template("shadow_bound"))
     if not scene.lights and not sky_lit:
-        lines.append("    // nothing lights the scene: a headlight, from the eye along the ray")
-        lines += _lit_lines("to_eye", "v3(1.0f, 1.0f, 1.0f)", passes, "    ")
+        lines += [_shade_template("headlight"), _lit("to_eye", _vector((1.0, 1.0, 1.0)), passes)]
     for index, light in enumerate(scene.lights):
         block, light_needs = _light_block(index, light, scene_ir.bound, on["TRANSPARENCY"], passes)
         lines.append(block)
         needs |= light_needs
     if passes and scene.lights:
-        # the fraction of the light the shadows take, averaged over the lights
-        lines.append(f"    passes->shadow = passes->shadow * {literal(1.0 / len(scene.lights))};")
-    lines += ["    return color;", "}"]
+        lines.append(_shade_template("shadow_share", share=literal(1.0 / len(scene.lights))))
+    lines.append(_shade_template("end"))
     if passes:
-        lines = ["typedef struct {", "    vec3 diffuse, specular;   // diffuse + specular = the shaded colour",
-                 "    real shadow, occlusion;", "} shading_passes;", "", *lines, "",
-                 "vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, real steps, mask hit,",
-                 "           __constant scalar *params) {", "    shading_passes unused;",
-                 "    return shade_passes(p, normal, dir, threshold, steps, hit, params, &unused);", "}"]
+        lines += ["", _shade_template("signature"), _shade_template("discarding_passes")]
     return "\n".join(lines), sorted(needs)
 
 
@@ -521,7 +461,7 @@ def features(scene_ir: SceneIR) -> dict[str, bool]:
         "TRANSPARENT_BACKGROUND": render.background == "transparent",
         # the passes asked for beyond the default channels (run.PASSES)
         **{f"PASS_{name.upper()}": name in render.aovs for name in PASSES},
-        "SHADING_PASSES": bool({"diffuse", "specular", "shadow", "ao"} & set(render.aovs)),
+        "SHADING_PASSES": bool(set(SHADING_PASSES) & set(render.aovs)),
         "PATH_TRACE": render.integrator == "path",
         "ENVIRONMENT": pathtrace.uses_environment(render),
     }
@@ -548,11 +488,14 @@ def _effect_constants(render, on: dict[str, bool]) -> list[str]:
 
 
 _FEATURE_IF = re.compile(r"^#if FEATURE_(\w+)\s*$")
+# a hook of the counting build (stdlib_cl/count.cl): a line of its own
+_COUNT_HOOK = re.compile(r"^\s*COUNT_(EVALUATIONS|MARCH|SCOPE)\(.*\);")
 
 
 def resolve_features(text: str, enabled: dict[str, bool]) -> str:
     """Keep the `#if FEATURE_X` blocks of enabled features (without their
-    directives) and drop the others; other preprocessor lines stay."""
+    directives) and drop the others; other preprocessor lines stay. The
+    counting build's hooks stay only in the counting build (`COUNT`)."""
     out, stack = [], []      # stack: None for a foreign #if, else whether kept
     for line in text.splitlines():
         match = _FEATURE_IF.match(line)
@@ -568,7 +511,7 @@ def resolve_features(text: str, enabled: dict[str, bool]) -> str:
         elif line.startswith("#endif") and stack:
             if stack.pop() is not None:
                 continue
-        if keeping:
+        if keeping and (enabled["COUNT"] or not _COUNT_HOOK.match(line)):
             out.append(line)
     return "\n".join(out)
 
@@ -686,12 +629,11 @@ def uniform_source(values: tuple[ir.Expr, ...], double: bool) -> str:
     lib = library()
     writer = _FunctionWriter(ir.Vec(tuple(values)))
     writer.block(writer.root, "    ")
-    stores = [f"    out[{i}] = (scalar){writer.argument(v)};" for i, v in enumerate(values)]
+    stores = [_scene_template("uniform_store", index=i, value=writer.argument(v)) for i, v in enumerate(values)]
     source = "\n\n".join([
         f"#define LANES 1\n#define PRECISION_DOUBLE {int(double)}\n#define FAST_MATH 0", lib.prelude,
         _library_text(lib.closure(sorted({name for v in values for name in _calls(v)}))),
-        "\n".join(["__kernel void uniform_values(__constant scalar *params, __global scalar *out) {",
-                   *writer.lines, *stores, "}"])])
+        _scene_template("uniform_values", body=_body(writer.lines), stores=_body(stores))])
     return double_literals(source) if double else source
 
 
@@ -766,7 +708,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         resolve_features(_library_text(shading_functions), on),
         _normal_functions(scene.render.normals),
         shade,
-        resolve_features(lib.template, on),
+        resolve_features(lib.engine, on),
         lib.distance_kernel,
         resolve_features(pathtrace.source(scene, literal, on["TRANSPARENCY"]), on) if on["PATH_TRACE"] else "",
     ]
@@ -823,13 +765,10 @@ def _scalar_copies(lib, functions, distance: str, derived: tuple[ir.Expr, ...], 
 def _normal_functions(method: str) -> str:
     """`estimate_normal` at any point, and `estimate_hit_normal` where a
     march hit with the estimate `here`, which forward differences reuse."""
-    anywhere = at_hit = f"{method}_normal(p, h, params)"
+    anywhere = at_hit = _scene_template("normal", method=method)
     if method == "forward":
-        anywhere, at_hit = ("forward_normal(p, distance_estimate(p, params), h, params)",
-                            "forward_normal(p, here, h, params)")
-    return (f"vec3 estimate_normal(vec3 p, real h, __constant scalar *params) {{\n    return {anywhere};\n}}\n\n"
-            f"vec3 estimate_hit_normal(vec3 p, real here, real h, __constant scalar *params) {{\n"
-            f"    return {at_hit};\n}}")
+        anywhere, at_hit = _scene_template("forward_normal_anywhere"), _scene_template("forward_normal_at_hit")
+    return _scene_template("normals", anywhere=anywhere, at_hit=at_hit)
 
 
 _FLOAT_LITERAL = re.compile(r"\b((?:\d+\.\d*|\.\d+)(?:[eE][+-]?\d+)?|\d+[eE][+-]?\d+)f\b")

@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
+from typing import Callable
 
 from . import ir
 from .program import (DEFAULT_MATERIAL, CheckedScene, Coloring, Combination, Fractal, Material, Primitive,
                       Shape, Transformed, WithMaterial, cosine_palette, fold_shape)
 from . import formula_code
 from .fractals import orbit
-from .stdlib import library
+from .stdlib import TRANSFORMS as LANGUAGE_TRANSFORMS
 
 POINT = ir.Var("p", ir.VEC3)
 # Evaluate a fractal within one bound radius of its bounding sphere. Beyond,
@@ -199,7 +200,6 @@ def _farther(a, b):
 class _Lowerer:
     def __init__(self, scene: CheckedScene, escape_time_sets: bool = False):
         self.materials = scene.materials
-        self.library = library()
         self.escape_time_sets = escape_time_sets
 
     def surface_of(self, name: str) -> Surface:
@@ -241,7 +241,7 @@ class _Lowerer:
         distance = self.estimate_or_set(orbit(s.signature.name, point, s.args))
         # A fractal: far from its bounding sphere, the sphere's distance is
         # a safe step and the fractal is not evaluated (Hart et al. 1989).
-        radius = ir.call(f"{s.signature.name}_bound_radius", s.args)
+        radius = ir.call(s.signature.bound_radius, s.args)
         bound = ir.call("sd_sphere", (ir.Vec(point), radius))
         return ir.bounded(bound, distance, ir.mul(radius, ir.const(BOUND_MARGIN)))
 
@@ -251,7 +251,7 @@ class _Lowerer:
             return surface
         args = dict(zip((p.name for p in s.signature.parameters), s.args))
         iterations = args.get("iterations", args.get("level"))
-        radius = ir.call(f"{s.signature.name}_bound_radius", s.args)
+        radius = ir.call(s.signature.bound_radius, s.args)
         return _trap_colored(surface, coloring, orbit(s.signature.name, point, s.args, trap=True).trap, point,
                              iterations, radius)
 
@@ -297,53 +297,13 @@ class _Lowerer:
     @staticmethod
     def moved(s: Transformed, point: Point) -> Point:
         """The point at which the transformed shape's field is read."""
-        kind, args = s.kind, s.args
-        if kind == "translate":
-            moved = tuple(ir.sub(p, v) for p, v in zip(point, args[0].items))
-            far = any(not ir.is_const(v) or abs(v.value) > MAX_COORDINATE for v in args[0].items)
-            return _clamped(moved) if far else moved
-        if kind == "rotate":
-            return _rotated(point, args[0], args[1])
-        if kind == "repeat":
-            return _repeated(point, args[0])
-        if kind == "scale":
-            moved = tuple(ir.div(p, args[0]) for p in point)
-            return moved if ir.is_const(args[0]) and args[0].value >= 1.0 else _clamped(moved)
-        if kind in ("twist", "bend"):
-            return ir.components(ir.call(f"{kind}_point", (ir.Vec(point), _warp_rate(args[0])), ir.VEC3))
-        return point
+        return TRANSFORM_LOWERINGS[s.kind].point(point, s.args)
 
     @staticmethod
     def transformed(s: Transformed, point: Point, d: ir.Expr, surface: Surface):
         """The transformed shape's (distance, surface) from its inner
         shape's at the moved point."""
-        kind, args = s.kind, s.args
-        if kind in ("translate", "rotate", "repeat"):
-            return d, surface
-        if kind == "scale":
-            return ir.mul(d, args[0]), surface
-        if kind in ("twist", "bend"):
-            warped = ir.div(d, ir.call(f"{kind}_lipschitz", (ir.Vec(point), _warp_rate(args[0]))))
-            inner = _Bounds().of(s.shape)
-            if inner is None or inner.sphere is None or inner.half_spaces:
-                return warped, surface
-            # Dividing by the warp's Lipschitz factor, which grows with the
-            # distance from the axis, caps the estimate near 1 / rate however
-            # far the point is: the march crawls and a soft shadow's k d / t
-            # reads the cap as a near miss (rings on a floor). The warp keeps
-            # the sphere about its axis that holds the shape, and that
-            # sphere's distance is a lower bound too: the larger of the two,
-            # and the sphere's alone far from it (as a fractal's bound).
-            centre, radius = _warped_sphere(kind, inner.sphere)
-            bound = ir.call("sd_sphere", (ir.Vec(tuple(ir.sub(p, c) for p, c in zip(point, centre))), radius))
-            return ir.bounded(bound, ir.op("max", warped, bound), ir.mul(radius, ir.const(BOUND_MARGIN))), surface
-        if kind == "round":
-            return ir.sub(d, args[0]), surface
-        if kind == "onion":
-            # a shell of thickness t inside the surface: |d + t/2| - t/2
-            half = ir.mul(args[0], ir.const(0.5))
-            return ir.sub(ir.op("abs", ir.add(d, half)), half), surface
-        raise ValueError(f"unknown transform {kind!r}")
+        return TRANSFORM_LOWERINGS[s.kind].distance(d, s.args, point, s.shape), surface
 
 
 Sphere = tuple[Point, ir.Expr]      # centre and radius
@@ -363,9 +323,6 @@ class _Bounds:
     """The Bound of a shape, or None where it is unbounded (repetition, a
     warp); unions take a sphere around their parts' spheres and all their
     half-spaces."""
-
-    def __init__(self):
-        self.library = library()
 
     def of(self, s: Shape) -> Bound | None:
         return fold_shape(s, None, self._parts, self._combine)
@@ -388,22 +345,16 @@ class _Bounds:
         if isinstance(s, Combination):
             return self._combination(s, bounds)
         inner = bounds[0]
-        if inner is None or s.kind == "repeat":
-            return None
-        if s.kind in ("twist", "bend"):     # a warped half-space is no half-space
-            return None if inner.sphere is None or inner.half_spaces else Bound(_warped_sphere(s.kind, inner.sphere))
-        return Bound(self._moved_sphere(s, inner.sphere),
-                     tuple(self._moved_half_space(s, h) for h in inner.half_spaces))
+        return None if inner is None else TRANSFORM_LOWERINGS[s.kind].bound(inner, s.args)
 
     def _primitive(self, s: Primitive) -> Bound | None:
         if s.signature.name == "plane":
             normal, offset = s.args
             length = ir.op("sqrt", _dot(*normal.items))
             return Bound(None, ((tuple(ir.div(c, length) for c in normal.items), offset),))
-        function = f"{s.signature.name}_bound_radius"
-        if function not in self.library.functions:
+        if not s.signature.bound_radius:
             return None
-        return Bound(((ir.const(0.0),) * 3, ir.call(function, s.args)))
+        return Bound(((ir.const(0.0),) * 3, ir.call(s.signature.bound_radius, s.args)))
 
     @staticmethod
     def _combination(s: Combination, bounds: list) -> Bound | None:
@@ -430,36 +381,6 @@ class _Bounds:
         half_spaces = tuple((n, ir.add(offset, bulge)) for b in bounds for n, offset in b.half_spaces)
         return Bound(sphere, half_spaces)
 
-    @staticmethod
-    def _moved_sphere(s: Transformed, sphere: Sphere | None) -> Sphere | None:
-        if sphere is None:
-            return None
-        centre, radius = sphere
-        args = s.args
-        if s.kind == "translate":
-            return tuple(ir.add(c, v) for c, v in zip(centre, args[0].items)), radius
-        if s.kind == "rotate":
-            return _rotated(centre, args[0], ir.neg(args[1])), radius
-        if s.kind == "scale":
-            return tuple(ir.mul(c, args[0]) for c in centre), ir.mul(radius, args[0])
-        if s.kind == "round":
-            return centre, ir.add(radius, args[0])
-        return centre, radius    # onion: inside the shape
-
-    @staticmethod
-    def _moved_half_space(s: Transformed, half_space: HalfSpace) -> HalfSpace:
-        normal, offset = half_space
-        args = s.args
-        if s.kind == "translate":
-            return normal, ir.add(offset, _dot3(normal, args[0].items))
-        if s.kind == "rotate":
-            return _rotated(normal, args[0], ir.neg(args[1])), offset
-        if s.kind == "scale":
-            return normal, ir.mul(offset, args[0])
-        if s.kind == "round":
-            return normal, ir.add(offset, args[0])
-        return normal, offset    # onion: inside the shape
-
 
 def _warped_sphere(kind: str, sphere: Sphere) -> Sphere:
     """A sphere that holds a twisted (bent) shape, from one that holds the
@@ -483,6 +404,132 @@ def _dot3(a: Point, b: Point) -> ir.Expr:
 
 def _dot(x, y, z) -> ir.Expr:
     return ir.add(ir.add(ir.mul(x, x), ir.mul(y, y)), ir.mul(z, z))
+
+
+# ---- transforms ----------------------------------------------------------------
+
+@dataclass(frozen=True)
+class TransformLowering:
+    """How a transform lowers, in three parts, none with a default:
+    `point(point, args)`: where the inner shape's field is read;
+    `distance(d, args, point, inner shape)`: the transformed shape's
+    distance from the inner one's `d` there; `bound(inner bound, args)`:
+    where the transformed shape can be (None: anywhere)."""
+    point: Callable[[Point, tuple], Point]
+    distance: Callable[[ir.Expr, tuple, Point, Shape], ir.Expr]
+    bound: Callable[["Bound", tuple], "Bound | None"]
+
+
+def _read_at(point: Point, args: tuple) -> Point:
+    """The point itself: the transform changes the distance, not where it is read."""
+    return point
+
+
+def _same_distance(d: ir.Expr, args: tuple, point: Point, shape: Shape) -> ir.Expr:
+    return d
+
+
+def _same_bound(inner: "Bound", args: tuple) -> "Bound":
+    """Within the inner shape: as bounded as it."""
+    return inner
+
+
+def _unbounded(inner: "Bound", args: tuple) -> None:
+    return None
+
+
+def _moving(sphere: Callable[[Sphere, tuple], Sphere],
+            half_space: Callable[[HalfSpace, tuple], HalfSpace]) -> Callable[["Bound", tuple], "Bound"]:
+    """A bound update that moves the inner bound's sphere and each of its half-spaces."""
+    def bound(inner: Bound, args: tuple) -> Bound:
+        return Bound(None if inner.sphere is None else sphere(inner.sphere, args),
+                     tuple(half_space(h, args) for h in inner.half_spaces))
+    return bound
+
+
+def _translated(point: Point, args: tuple) -> Point:
+    moved = tuple(ir.sub(p, v) for p, v in zip(point, args[0].items))
+    far = any(not ir.is_const(v) or abs(v.value) > MAX_COORDINATE for v in args[0].items)
+    return _clamped(moved) if far else moved
+
+
+def _scaled(point: Point, args: tuple) -> Point:
+    moved = tuple(ir.div(p, args[0]) for p in point)
+    return moved if ir.is_const(args[0]) and args[0].value >= 1.0 else _clamped(moved)
+
+
+def _onion(d: ir.Expr, args: tuple, point: Point, shape: Shape) -> ir.Expr:
+    # a shell of thickness t inside the surface: |d + t/2| - t/2
+    half = ir.mul(args[0], ir.const(0.5))
+    return ir.sub(ir.op("abs", ir.add(d, half)), half)
+
+
+def _warp(kind: str, point_function: str, lipschitz_function: str) -> TransformLowering:
+    """A warp (twist, bend): the point moved by the library's
+    `point_function`, the distance divided by its Lipschitz factor
+    (`lipschitz_function`), and a sphere about the warp's axis for a bound."""
+    def point(p: Point, args: tuple) -> Point:
+        return ir.components(ir.call(point_function, (ir.Vec(p), _warp_rate(args[0])), ir.VEC3))
+
+    def distance(d: ir.Expr, args: tuple, p: Point, shape: Shape) -> ir.Expr:
+        warped = ir.div(d, ir.call(lipschitz_function, (ir.Vec(p), _warp_rate(args[0]))))
+        inner = _Bounds().of(shape)
+        if inner is None or inner.sphere is None or inner.half_spaces:
+            return warped
+        # Dividing by the warp's Lipschitz factor, which grows with the
+        # distance from the axis, caps the estimate near 1 / rate however
+        # far the point is: the march crawls and a soft shadow's k d / t
+        # reads the cap as a near miss (rings on a floor). The warp keeps
+        # the sphere about its axis that holds the shape, and that
+        # sphere's distance is a lower bound too: the larger of the two,
+        # and the sphere's alone far from it (as a fractal's bound).
+        centre, radius = _warped_sphere(kind, inner.sphere)
+        bound = ir.call("sd_sphere", (ir.Vec(tuple(ir.sub(c, o) for c, o in zip(p, centre))), radius))
+        return ir.bounded(bound, ir.op("max", warped, bound), ir.mul(radius, ir.const(BOUND_MARGIN)))
+
+    def bound(inner: Bound, args: tuple) -> Bound | None:
+        # a warped half-space is no half-space
+        return None if inner.sphere is None or inner.half_spaces else Bound(_warped_sphere(kind, inner.sphere))
+    return TransformLowering(point, distance, bound)
+
+
+# Each transform of the language (stdlib.TRANSFORMS but the surface ones,
+# which lower as WithMaterial) and how it lowers.
+TRANSFORM_LOWERINGS = {
+    "translate": TransformLowering(
+        _translated, _same_distance,
+        _moving(lambda sphere, args: (tuple(ir.add(c, v) for c, v in zip(sphere[0], args[0].items)), sphere[1]),
+                lambda half_space, args: (half_space[0], ir.add(half_space[1], _dot3(half_space[0], args[0].items))))),
+    "rotate": TransformLowering(
+        lambda point, args: _rotated(point, args[0], args[1]), _same_distance,
+        _moving(lambda sphere, args: (_rotated(sphere[0], args[0], ir.neg(args[1])), sphere[1]),
+                lambda half_space, args: (_rotated(half_space[0], args[0], ir.neg(args[1])), half_space[1]))),
+    "scale": TransformLowering(
+        _scaled, lambda d, args, point, shape: ir.mul(d, args[0]),
+        _moving(lambda sphere, args: (tuple(ir.mul(c, args[0]) for c in sphere[0]), ir.mul(sphere[1], args[0])),
+                lambda half_space, args: (half_space[0], ir.mul(half_space[1], args[0])))),
+    "repeat": TransformLowering(lambda point, args: _repeated(point, args[0]), _same_distance, _unbounded),
+    "round": TransformLowering(
+        _read_at, lambda d, args, point, shape: ir.sub(d, args[0]),
+        _moving(lambda sphere, args: (sphere[0], ir.add(sphere[1], args[0])),
+                lambda half_space, args: (half_space[0], ir.add(half_space[1], args[0])))),
+    "onion": TransformLowering(_read_at, _onion, _same_bound),
+    "twist": _warp("twist", "twist_point", "twist_lipschitz"),
+    "bend": _warp("bend", "bend_point", "bend_lipschitz"),
+}
+SURFACE_TRANSFORMS = ("material", "color")     # lowered as WithMaterial
+
+
+def _check_lowerings() -> None:
+    """Every transform of the language has its lowering, and every lowering
+    its transform: checked at import, so that none is missed."""
+    wanted = set(LANGUAGE_TRANSFORMS) - set(SURFACE_TRANSFORMS)
+    if wanted != set(TRANSFORM_LOWERINGS):
+        raise ImportError(f"transforms without a lowering: {sorted(wanted - set(TRANSFORM_LOWERINGS))}; "
+                          f"lowerings of no transform: {sorted(set(TRANSFORM_LOWERINGS) - wanted)}")
+
+
+_check_lowerings()
 
 
 def lower(scene: CheckedScene, escape_time_sets: bool = False) -> SceneIR:

@@ -15,6 +15,8 @@ PASSES = {
     "material": ("material",),
     "albedo": ("albedo.R", "albedo.G", "albedo.B"),
 }
+# the passes the direct renderer's shading fills in (`shade_passes`, stdlib_cl/shade.cl)
+SHADING_PASSES = ("diffuse", "specular", "shadow", "ao")
 
 
 def channels(aovs=()) -> tuple[str, ...]:

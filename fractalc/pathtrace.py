@@ -1,57 +1,20 @@
 """The path tracer's part of a kernel (render key `integrator: path`,
 docs/looks.md#path-tracing): its constants (bounces, the lights as a
-table) and the library file stdlib_cl/pathtrace.cl, which the emitter
-places after the template; and the environment's constants, which both
+table: fractalc/lights.py) and the library file stdlib_cl/pathtrace.cl,
+which the emitter places after the engine; and the environment's constants, which both
 integrators use: the sky or map, the map's sampling tables, and the
 irradiance that lights the direct renderer's surfaces as spherical
 harmonics (docs/looks.md#environment)."""
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from functools import lru_cache
 
 import numpy as np
 
+from .lights import LIGHT_STRIDE, MAX_INVERSE_SQUARE, MAX_IRRADIANCE, light_layout, lights_table
 from .program import CheckedScene
 from .resources import resource_dir
-
-LIGHT_KINDS = {"directional": 0, "point": 1, "spot": 3, "sphere": 4, "rectangle": 5}
-HEADLIGHT = 2          # no lights in the scene: a light at the eye
-LIGHT_STRIDE = 19      # numbers per light in the kernel's LIGHTS table
-MAX_IRRADIANCE = 1e20  # light values stay within float's range
-
-
-def _light_row(kind: int, vector, color, intensity: float, shadows: bool,
-               axis=(0.0, 0.0, -1.0), cone=(-1.0, -1.0), edges=(0.0,) * 6) -> list[float]:
-    """kind, the direction toward the light or its position, irradiance
-    (pi colour intensity: a white diffuse surface facing the light shows
-    colour intensity, as in the direct renderer), whether it casts
-    shadows, a spot's unit axis and cone cosines (outer, inner), and a
-    rectangle's two edges."""
-    irradiance = [min(math.pi * c * intensity, MAX_IRRADIANCE) for c in color]
-    return [float(kind), *vector, *irradiance, 1.0 if shadows else 0.0, *axis, *cone, *edges]
-
-
-def lights_table(scene: CheckedScene) -> list[list[float]]:
-    rows = []
-    for light in scene.lights:
-        vector = light.vector
-        if light.kind == "directional":   # the file gives the direction light travels
-            length = math.sqrt(sum(c * c for c in vector))
-            vector = tuple(-c / length for c in vector)
-        length = math.sqrt(sum(c * c for c in light.direction))
-        inner, outer = light.cone_cosines()
-        # a spot's cone cosines, or a sphere light's radius
-        cone = (light.radius, 0.0) if light.kind == "sphere" else (outer, max(inner, outer + 1e-6))
-        edges = sum(light.rectangle_edges(), ()) if light.kind == "rectangle" else (0.0,) * 6
-        rows.append(_light_row(LIGHT_KINDS[light.kind], vector, light.color, light.intensity,
-                               light.shadows != "none", tuple(c / length for c in light.direction), cone, edges))
-    if not rows and scene.render.environment is None and scene.render.environment_map is None:
-        # nothing lights the scene: a headlight
-        rows.append(_light_row(HEADLIGHT, (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 1.0, True))
-    return rows
-
 
 def uses_environment(render) -> bool:
     """Whether the kernel has the template's `environment` (the sky): an
@@ -296,7 +259,8 @@ def source(scene: CheckedScene, literal, transparency: bool) -> str:
     whether some material is transparent (the template's FEATURE_TRANSPARENCY)."""
     render = scene.render
     rows = lights_table(scene)
-    constants = [f"#define BOUNCES {render.bounces}", f"#define LIGHT_STRIDE {LIGHT_STRIDE}",
+    constants = [f"#define BOUNCES {render.bounces}", *light_layout(),
+                 f"#define MAX_INVERSE_SQUARE {literal(MAX_INVERSE_SQUARE)}",
                  f"#define CAMERA_SEES_ENVIRONMENT {int(render.background != 'transparent')}",
                  f"#define PATH_TRANSPARENCY {int(transparency)}",
                  f"#define AREA_LIGHTS {int(any(light.kind in ('sphere', 'rectangle') for light in scene.lights))}",

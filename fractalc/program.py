@@ -172,7 +172,7 @@ def constant(value) -> ir.Expr | ir.Vec:
 
 
 # A camera's projections and stereo layouts, in the order of their codes in
-# the kernel's camera block (stdlib_cl/raymarch.cl, CAMERA_PROJECTION).
+# the kernel's camera block (stdlib_cl/engine/interface.cl, CAMERA_PROJECTION).
 class Projection(StrEnum):
     PINHOLE = "pinhole"
     FISHEYE = "fisheye"

@@ -15,20 +15,47 @@ ARG is `name: type [= default] [constraint ...]`, with types `num`, `int`,
 and constraints `>X`, `>=X`, `<=X`, `<X`, `A..B` (inclusive), `nonzero`, or
 `<=other_arg`. The language-level forms that are not library functions
 (combinators, transforms, math) are tabled below.
+
+Besides the library: the prelude, the engine (`engine/`, the fixed part of
+every render kernel, ENGINE), the kernel of distances at points, and the
+templates of what the emitter writes per scene (`shade.cl`, `scene.cl`:
+`templates`).
 """
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import StrEnum
 from functools import lru_cache
+from string import Template
 
 from .resources import resource_dir
 from .types import NONZERO, Parameter, Type, above, at_least, between, parse_constraint
 
 PRELUDE = "prelude.cl"
-TEMPLATE = "raymarch.cl"
 DISTANCE_KERNEL = "distance.cl"
+# The engine: the fixed part of every render kernel, one file per concern
+# in stdlib_cl/engine/, in the order the kernel holds them (each after what
+# it uses); its `#if FEATURE_` blocks hold the optional effects.
+ENGINE_DIR = "engine"
+BOUND_RADIUS = "_bound_radius"   # the suffix of a shape's bounding radius function (Signature.bound_radius)
+ENGINE = (
+    "interface",     # what the generated code defines; the camera argument's layout
+    "hits",          # Hart's hit threshold; a march's result
+    "cone",          # cone marching of a work-item's packet of rays
+    "march",         # sphere tracing, over-relaxed, within the scene's bound
+    "camera",        # camera rays: projections, stereo, depth of field
+    "sky",           # the environment (a sky gradient or map) and the background
+    "random",        # per-lane hashes for jitter
+    "channels",      # storing a block's pixels into the output's channels
+    "normal",        # the normal where a march hit
+    "fog",
+    "reflections",
+    "refraction",    # transparency
+    "glow",
+    "trace",         # the colour seen along a ray, effects included
+    "render",        # the `render` kernel: samples, then the channels and passes
+)
 
 
 @dataclass(frozen=True)
@@ -37,6 +64,10 @@ class Signature:
     name: str
     parameters: tuple[Parameter, ...]
     function: str = ""             # the OpenCL function implementing it
+    # the library function `NAME_bound_radius` of its arguments, where the
+    # library has one: the radius of a sphere about the origin holding the
+    # shape ("": unbounded, or not known)
+    bound_radius: str = ""
 
 
 @dataclass(frozen=True)
@@ -158,7 +189,7 @@ class Library:
     functions: dict[str, Function]
     signatures: dict[str, Signature]
     prelude: str
-    template: str
+    engine: str             # the files of ENGINE, in order
     distance_kernel: str    # `distance_at_points`, for render programs and distance programs alike
 
     def closure(self, roots) -> list[Function]:
@@ -185,6 +216,8 @@ def library() -> Library:
     functions: dict[str, Function] = {}
     signatures: dict[str, Signature] = {}
     for path in sorted(root.glob("*/*.cl")):
+        if path.parent.name == ENGINE_DIR:
+            continue
         file_name = str(path.relative_to(root))
         found, sigs = _parse_file(path, file_name)
         functions.update((f.name, f) for f in found)
@@ -196,8 +229,33 @@ def library() -> Library:
         called = {m for m in _IDENTIFIER.findall(body) if m in names and m != f.name}
         with_calls[f.name] = Function(f.name, f.source, f.header, f.file, tuple(sorted(called)),
                                       f.parameter_types)
-    return Library(with_calls, signatures, (root / PRELUDE).read_text(), (root / TEMPLATE).read_text(),
-                   (root / DISTANCE_KERNEL).read_text())
+    # each shape's bounding radius, where the library has one
+    signatures = {name: replace(sig, bound_radius=name + BOUND_RADIUS) if name + BOUND_RADIUS in functions else sig
+                  for name, sig in signatures.items()}
+    engine = "\n\n".join((root / ENGINE_DIR / f"{name}.cl").read_text().rstrip("\n") for name in ENGINE)
+    return Library(with_calls, signatures, (root / PRELUDE).read_text(), engine, (root / DISTANCE_KERNEL).read_text())
+
+
+_TEMPLATE_START = "//@ "
+
+
+@lru_cache(maxsize=None)
+def templates(file_name: str) -> dict[str, Template]:
+    """The templates of the OpenCL C the emitter writes per scene, from the
+    file `stdlib_cl/FILE_NAME`: a line `//@ NAME [what it is]` opens the
+    template NAME, which runs to the next such line (its trailing blank
+    lines dropped); `$name` in it marks a value the emitter writes there."""
+    found: dict[str, list[str]] = {}
+    lines = None
+    for line in (resource_dir("stdlib_cl") / file_name).read_text().splitlines():
+        if line.startswith(_TEMPLATE_START):
+            name = line[len(_TEMPLATE_START):].split()[0]
+            if name in found:
+                raise ValueError(f"{file_name}: a second template {name}")
+            lines = found[name] = []
+        elif lines is not None:
+            lines.append(line)
+    return {name: Template("\n".join(lines).rstrip("\n")) for name, lines in found.items()}
 
 
 # ---- language forms that are not library functions -------------------------

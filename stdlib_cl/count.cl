@@ -1,9 +1,12 @@
 // The counting build of `fractalc bench --count` (fractalc/count.py): the
-// library's `#if FEATURE_COUNT` lines call these before each distance
-// evaluation. Only that build has them: there `params` is a __global buffer
-// whose values are followed, from COUNT_BASE, by COUNT_SLOTS reals (one per
-// ray) per work-item. Rays are counted where they are marched (their lanes
-// of a mask), not the lanes a vector evaluates along with them.
+// engine and the library call its hooks, COUNT_EVALUATIONS before each
+// distance evaluation, COUNT_MARCH before a march, COUNT_SCOPE before a
+// function that serves the rays of a mask (a normal, AO); each hook is a
+// line of its own, which the emitter drops from every other kernel. Only
+// this build has them: there `params` is a __global buffer whose values
+// are followed, from COUNT_BASE, by COUNT_SLOTS reals (one per ray) per
+// work-item. Rays are counted where they are marched (their lanes of a
+// mask), not the lanes a vector evaluates along with them.
 #define COUNT_CAMERA 0
 #define COUNT_NORMALS 1
 #define COUNT_SHADOWS 2
@@ -21,6 +24,10 @@
 #define SLOT_COUNTS 3
 #define SLOT_ITERATIONS (SLOT_COUNTS + COUNT_PURPOSES)
 #define COUNT_SLOTS (SLOT_ITERATIONS + 1)
+// the hooks, in the calling function's `params`
+#define COUNT_EVALUATIONS(purpose, rays, each) count_evaluations(purpose, rays, each, params)
+#define COUNT_MARCH(purpose) count_march_purpose(purpose, params)
+#define COUNT_SCOPE(rays) count_scope(rays, params)
 
 __global scalar *count_slots(__global scalar *params) {
     size_t item = get_global_id(1) * get_global_size(0) + get_global_id(0);

@@ -6,17 +6,12 @@
 //   CAMERA_SEES_ENVIRONMENT 1, or 0 with a transparent background
 //   PATH_TRANSPARENCY       1 where a material is transparent (the template
 //                           then has through_solid)
-//   LIGHT_COUNT, LIGHTS[]   LIGHT_STRIDE numbers per light: kind (0
-//                           directional, 1 point, 2 the headlight, 3 spot,
-//                           4 sphere, 5 rectangle),
-//                           its direction toward the light or its position,
-//                           irradiance (pi colour intensity: a white diffuse
-//                           surface facing it shows colour intensity, as in
-//                           the direct renderer), shadows (1 or 0), a
-//                           spot's axis and its cone's outer and inner
-//                           cosines, or a sphere's radius (at 11), and a
-//                           rectangle's edges (13 to 18)
+//   LIGHT_COUNT, LIGHTS[]   LIGHT_STRIDE numbers per light, each field at
+//                           its offset LIGHT_KIND, LIGHT_VECTOR, ...
+//                           (lights.LIGHT_FIELDS says what they hold);
+//                           its kind one of the codes LIGHT_IS_POINT, ...
 //   AREA_LIGHTS             1 where a light is a sphere or a rectangle
+//   MAX_INVERSE_SQUARE      the cap of a light's 1 / d^2 (as the direct renderer's)
 //   MIS                     1: light that both next-event estimation and the
 //                           surface's lobes can find is weighted between them
 //                           (the power heuristic); 0: next-event estimation's
@@ -168,10 +163,24 @@ real sample_environment(lane_uint key, uint first, vec3 *dir, vec3 *radiance) {
 }
 #endif
 
+// The vector of a light's table row at `field` (LIGHT_VECTOR, LIGHT_AXIS, ...).
+vec3 light_vec3(__constant scalar *light, int field) {
+    return v3(light[field], light[field + 1], light[field + 2]);
+}
+
+// Its squared length, in scalars.
+scalar light_length2(__constant scalar *light, int field) {
+    return light[field] * light[field] + light[field + 1] * light[field + 1] + light[field + 2] * light[field + 2];
+}
+
+// Whether a light has an area that rays may meet: a sphere or a rectangle.
+bool is_area_light(__constant scalar *light) {
+    return light[LIGHT_KIND] == LIGHT_IS_SPHERE || light[LIGHT_KIND] == LIGHT_IS_RECTANGLE;
+}
+
 // A rectangle light's area: the lengths of its two (perpendicular) edges.
 scalar rectangle_area(__constant scalar *light) {
-    return sqrt((light[13] * light[13] + light[14] * light[14] + light[15] * light[15])
-                * (light[16] * light[16] + light[17] * light[17] + light[18] * light[18]));
+    return sqrt(light_length2(light, LIGHT_WIDTH) * light_length2(light, LIGHT_HEIGHT));
 }
 
 #if AREA_LIGHTS
@@ -187,16 +196,16 @@ vec3 area_light_seen(vec3 origin, vec3 dir, real reach, real density, mask delta
     *seen = (mask)0;
     for (int i = 0; i < LIGHT_COUNT; i++) {
         __constant scalar *light = LIGHTS + i * LIGHT_STRIDE;
-        if ((light[0] != 4.0f && light[0] != 5.0f) || i == skip)
+        if (!is_area_light(light) || i == skip)
             continue;
-        vec3 offset = v3_sub(v3(light[1], light[2], light[3]), origin);
+        vec3 offset = v3_sub(light_vec3(light, LIGHT_VECTOR), origin);
         real t, light_density;
         mask met;
         scalar area;
-        if (light[0] == 4.0f) {
+        if (light[LIGHT_KIND] == LIGHT_IS_SPHERE) {
             // the ball's near side, seen from outside it; next-event
             // estimation draws directions uniformly in the cone it fills
-            scalar radius = light[11];
+            scalar radius = light[LIGHT_RADIUS];
             real along = v3_dot(offset, dir), distance2 = v3_dot(offset, offset);
             real discriminant = along * along - distance2 + radius * radius;
             t = along - sqrt(max(discriminant, 0.0f));
@@ -207,8 +216,8 @@ vec3 area_light_seen(vec3 origin, vec3 dir, real reach, real density, mask delta
         } else {
             // the panel's plane, within its edges; next-event estimation
             // draws points uniformly on it (density d^2 / (area cos))
-            vec3 axis = v3(light[8], light[9], light[10]);
-            vec3 width = v3(light[13], light[14], light[15]), height = v3(light[16], light[17], light[18]);
+            vec3 axis = light_vec3(light, LIGHT_AXIS);
+            vec3 width = light_vec3(light, LIGHT_WIDTH), height = light_vec3(light, LIGHT_HEIGHT);
             real facing = -v3_dot(dir, axis);
             t = v3_dot(offset, axis) / SELECT(-facing, (real)-1.0f, facing == 0.0f);
             vec3 on_plane = v3_sub(v3_scale(dir, t), offset);
@@ -219,9 +228,9 @@ vec3 area_light_seen(vec3 origin, vec3 dir, real reach, real density, mask delta
             light_density = t * t / max(area * facing, (real)1e-30f);
         }
         met = met & (t < nearest);
-        real weight = light[7] != 0.0f ? lobe_sample_weight(density, light_density, delta)
+        real weight = light[LIGHT_SHADOWS] != 0.0f ? lobe_sample_weight(density, light_density, delta)
                                        : SELECT((real)0.0f, (real)1.0f, delta);
-        vec3 radiance = v3_scale(v3(light[4], light[5], light[6]), weight / area);
+        vec3 radiance = v3_scale(light_vec3(light, LIGHT_IRRADIANCE), weight / area);
         emitted = v3_select(emitted, radiance, met);
         nearest = SELECT(nearest, t, met);
         *seen = *seen | met;
@@ -240,25 +249,25 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
     vec3 total = v3((real)0.0f, 0.0f, 0.0f);
     for (int i = 0; i < LIGHT_COUNT; i++) {
         __constant scalar *light = LIGHTS + i * LIGHT_STRIDE;
-        vec3 vector = v3(light[1], light[2], light[3]);
+        vec3 vector = light_vec3(light, LIGHT_VECTOR);
         vec3 to_light = vector;
         real reach = (real)MAX_DISTANCE, falloff = 1.0f;
         real light_density = 0.0f;     // an area light's density of its sampled direction
-        if (light[0] != 0.0f) {
-            bool headlight = light[0] == 2.0f;
+        if (light[LIGHT_KIND] != LIGHT_IS_DIRECTIONAL) {
+            bool headlight = light[LIGHT_KIND] == LIGHT_IS_HEADLIGHT;
             vec3 offset = v3_sub(headlight ? eye : vector, p);
             reach = v3_length(offset);
             to_light = v3_scale(offset, 1.0f / max(reach, (real)1e-30f));
             if (!headlight)
-                falloff = fmin(1.0f / (reach * reach), 1e8f);
-            if (light[0] == 3.0f)   // a spot's cone: smoothstep across its falloff
-                falloff = falloff * smoothstep(light[11], light[12],
-                                               -v3_dot(to_light, v3(light[8], light[9], light[10])));
-            if (light[0] == 4.0f) {
+                falloff = fmin(1.0f / (reach * reach), MAX_INVERSE_SQUARE);
+            if (light[LIGHT_KIND] == LIGHT_IS_SPOT)   // a spot's cone: smoothstep across its falloff
+                falloff = falloff * smoothstep(light[LIGHT_CONE_OUTER], light[LIGHT_CONE_INNER],
+                                               -v3_dot(to_light, light_vec3(light, LIGHT_AXIS)));
+            if (light[LIGHT_KIND] == LIGHT_IS_SPHERE) {
                 // a sphere light of radiance irradiance / (pi r^2): a direction
                 // uniform in the cone the sphere fills, weighted by the cone's
                 // solid angle 2 pi (1 - cos_max) (1 / d^2 from afar, as a point)
-                scalar radius = light[11];
+                scalar radius = light[LIGHT_RADIUS];
                 real sin2 = fmin(radius * radius / (reach * reach), 1.0f);
                 real cos_max = sqrt(1.0f - sin2);
                 real one_minus_cos = sin2 / (1.0f + cos_max);     // 1 - cos_max, exact for a small sphere
@@ -270,19 +279,19 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
                 reach = reach * cos_t - sqrt(max(radius * radius - reach * reach * sin_t * sin_t, 0.0f));
                 to_light = around_normal(to_light, v3(sin_t * cos(angle), sin_t * sin(angle), cos_t));
             }
-            if (light[0] == 5.0f) {
+            if (light[LIGHT_KIND] == LIGHT_IS_RECTANGLE) {
                 // a rectangle of radiance irradiance / area, lighting the side
                 // its axis faces: a point uniform on it, weighted by the
                 // cosine there over the squared distance
                 real s = sample_random(key, first + 2u * (uint)i) - 0.5f;
                 real t = sample_random(key, first + 2u * (uint)i + 1u) - 0.5f;
-                vec3 point = v3_add(vector, v3_add(v3_scale(v3(light[13], light[14], light[15]), s),
-                                                   v3_scale(v3(light[16], light[17], light[18]), t)));
+                vec3 point = v3_add(vector, v3_add(v3_scale(light_vec3(light, LIGHT_WIDTH), s),
+                                                   v3_scale(light_vec3(light, LIGHT_HEIGHT), t)));
                 vec3 offset = v3_sub(point, p);
                 reach = v3_length(offset);
                 to_light = v3_scale(offset, 1.0f / max(reach, (real)1e-30f));
-                real facing = -v3_dot(to_light, v3(light[8], light[9], light[10]));
-                falloff = fmin(max(facing, 0.0f) / (reach * reach), 1e8f);
+                real facing = -v3_dot(to_light, light_vec3(light, LIGHT_AXIS));
+                falloff = fmin(max(facing, 0.0f) / (reach * reach), MAX_INVERSE_SQUARE);
                 light_density = reach * reach / max(rectangle_area(light) * facing, (real)1e-30f);
             }
         }
@@ -290,10 +299,8 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
         mask lit = active & (cosine > 0.0f);
         if (!ANY(lit))
             continue;
-        if (light[7] != 0.0f) {
-#if FEATURE_COUNT
-            count_march_purpose(COUNT_SHADOWS, params);
-#endif
+        if (light[LIGHT_SHADOWS] != 0.0f) {
+            COUNT_MARCH(COUNT_SHADOWS);
             march_result blocker = march(lifted, to_light, lit, pixel_angle, 0.0f, params);
             lit = lit & !(blocker.hit & (blocker.t < reach));
 #if AREA_LIGHTS
@@ -311,10 +318,10 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
         vec3 reflected = v3_add(v3_scale(albedo, diffuse_weight * INV_PI), v3((real)(glossy_weight * glossy),
                                 glossy_weight * glossy, glossy_weight * glossy));
         real strength = SELECT((real)0.0f, cosine * falloff, lit);
-        if ((light[0] == 4.0f || light[0] == 5.0f) && light[7] != 0.0f)   // the lobes find it too
+        if (is_area_light(light) && light[LIGHT_SHADOWS] != 0.0f)   // the lobes find it too
             strength = strength * light_sample_weight(light_density, bsdf_density(n, to_eye, to_light,
                                                                                    diffuse_weight, glossy_weight, alpha));
-        total = v3_add(total, v3_mul(reflected, v3_scale(v3(light[4], light[5], light[6]), strength)));
+        total = v3_add(total, v3_mul(reflected, v3_scale(light_vec3(light, LIGHT_IRRADIANCE), strength)));
     }
 #if ENVIRONMENT_MAP
     // the environment map as a light: one direction drawn by its
@@ -324,9 +331,7 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
     real cosine = v3_dot(n, to_sky);
     mask lit = active & (cosine > 0.0f) & (density > 0.0f);
     if (ANY(lit)) {
-#if FEATURE_COUNT
-        count_march_purpose(COUNT_SHADOWS, params);
-#endif
+        COUNT_MARCH(COUNT_SHADOWS);
         march_result blocker = march(lifted, to_sky, lit, pixel_angle, 0.0f, params);
         lit = lit & !blocker.hit;
 #if AREA_LIGHTS
@@ -447,9 +452,7 @@ vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel
             throughput = v3_scale(throughput, 1.0f / max(going_on, (real)1e-6f));
         }
         active = active & (max(throughput.x, max(throughput.y, throughput.z)) > 0.0f);
-#if FEATURE_COUNT
-        count_march_purpose(COUNT_REFLECTIONS, params);     // a bounce is a reflected ray
-#endif
+        COUNT_MARCH(COUNT_REFLECTIONS);     // a bounce is a reflected ray
         m = march(start, scattered, active, pixel_angle, 0.0f, params);
 #if AREA_LIGHTS
         // a light that the new direction meets before the next surface: its

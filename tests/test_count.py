@@ -185,7 +185,7 @@ def test_every_evaluation_in_the_counting_build_is_counted():
                   and not f.startswith(("real distance_estimate(", "__kernel VECTOR_LANES_HINT void distance_at_points("))]
     assert len(evaluating) >= 6       # march, normals, AO, both shadows, refraction
     for function in evaluating:
-        assert "count_evaluations(" in function, function.split("\n", 1)[0]
+        assert "COUNT_EVALUATIONS(" in function, function.split("\n", 1)[0]
 
 
 @pytest.mark.opencl

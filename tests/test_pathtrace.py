@@ -577,3 +577,31 @@ def test_multiple_importance_sampling_lowers_the_error_on_a_glossy_floor_under_a
     error = {mis: np.sqrt(((renders(text, monkeypatch, mis, range(3), 16) - reference) ** 2).mean(axis=(1, 2, 3))).mean()
              for mis in (True, False)}
     assert error[True] < error[False] / 3, error
+
+
+def test_the_lights_table_holds_each_field_at_its_named_offset():
+    """The kernel reads the LIGHTS table by the offsets `light_layout`
+    defines: each light's row holds its values there."""
+    from fractalc import lights
+    scene = fractalc.loads("""
+    light spot { position: (1, 2, 3), direction: (0, 0, -2), angle: 30, falloff: 10, intensity: 2 }
+    light sphere { position: (0.2, 0, 2), radius: 0.4, intensity: 4, shadows: none }
+    light rectangle { position: (0.5, 0, 2), direction: (0, 0, -1), width: 1.5, height: 0.5, intensity: 4 }
+    scene sphere(1)
+    render { integrator: path }
+    """).checked
+    at = {name: int(value) for line in lights.light_layout() for _, name, value in [line.split()]}
+    spot, sphere, rectangle = lights.lights_table(scene)
+    assert all(len(row) == at["LIGHT_STRIDE"] for row in (spot, sphere, rectangle))
+    assert [row[at["LIGHT_KIND"]] for row in (spot, sphere, rectangle)] == [
+        at["LIGHT_IS_SPOT"], at["LIGHT_IS_SPHERE"], at["LIGHT_IS_RECTANGLE"]]
+    assert spot[at["LIGHT_VECTOR"]:at["LIGHT_VECTOR"] + 3] == [1.0, 2.0, 3.0]
+    assert spot[at["LIGHT_AXIS"]:at["LIGHT_AXIS"] + 3] == [0.0, 0.0, -1.0]
+    assert spot[at["LIGHT_IRRADIANCE"]] == pytest.approx(2 * math.pi)
+    inner, outer = scene.lights[0].cone_cosines()
+    assert (spot[at["LIGHT_CONE_OUTER"]], spot[at["LIGHT_CONE_INNER"]]) == pytest.approx((outer, inner))
+    assert sphere[at["LIGHT_RADIUS"]] == 0.4
+    assert (spot[at["LIGHT_SHADOWS"]], sphere[at["LIGHT_SHADOWS"]]) == (1.0, 0.0)
+    width, height = scene.lights[2].rectangle_edges()
+    assert rectangle[at["LIGHT_WIDTH"]:at["LIGHT_WIDTH"] + 3] == list(width)
+    assert rectangle[at["LIGHT_HEIGHT"]:at["LIGHT_HEIGHT"] + 3] == list(height)

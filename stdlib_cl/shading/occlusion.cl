@@ -12,9 +12,7 @@ real ambient_occlusion(vec3 p, vec3 normal, real delta, real strength, __constan
     mask open = (mask)0;
     for (int i = 5; i >= 1 && !ALL(open); i--) {
         real along = delta * (real)i;
-#if FEATURE_COUNT
-        count_evaluations(COUNT_AO, scoped(params) & !open, 1.0f, params);
-#endif
+        COUNT_EVALUATIONS(COUNT_AO, scoped(params) & !open, 1.0f);
         real d = distance_estimate(v3_add(p, v3_scale(normal, along)), params);
         occlusion += SELECT(weight * max(along - d, 0.0f) / delta, (real)0.0f, open);
         open = open | (d >= along);

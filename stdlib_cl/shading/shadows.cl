@@ -15,9 +15,7 @@ real hard_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, mask ac
     real visible = 1.0f;
     real omega = 1.6f, previous = 0.0f, step = 0.0f;
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
-#if FEATURE_COUNT
-        count_evaluations(COUNT_SHADOWS, active, 1.0f, params);
-#endif
+        COUNT_EVALUATIONS(COUNT_SHADOWS, active, 1.0f);
         real d = distance_estimate(v3_add(origin, v3_scale(to_light, t)), params);
         mask overshot = active & (omega > 1.0f) & (d + previous < step);
         t = SELECT(t, t - step, overshot);
@@ -50,9 +48,7 @@ real hard_shadow_through(vec3 origin, vec3 to_light, real max_t, real threshold,
     mask clear_of_surface = MASK_TRUE;
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
         vec3 q = v3_add(origin, v3_scale(to_light, t));
-#if FEATURE_COUNT
-        count_evaluations(COUNT_SHADOWS, active, 1.0f, params);
-#endif
+        COUNT_EVALUATIONS(COUNT_SHADOWS, active, 1.0f);
         real d = distance_estimate(q, params);
         mask entering = active & clear_of_surface & (d < threshold);
         if (ANY(entering)) {
@@ -76,9 +72,7 @@ real lowest_ratio(vec3 origin, vec3 to_light, real a, real b, real c, real ratio
                   __constant scalar *params) {
     for (int i = 0; i < 4; i++) {
         real left = 0.5f * (a + b), right = 0.5f * (b + c);
-#if FEATURE_COUNT
-        count_evaluations(COUNT_SHADOWS, scoped(params), 2.0f, params);
-#endif
+        COUNT_EVALUATIONS(COUNT_SHADOWS, scoped(params), 2.0f);
         real at_left = distance_estimate(v3_add(origin, v3_scale(to_light, left)), params) / left;
         real at_right = distance_estimate(v3_add(origin, v3_scale(to_light, right)), params) / right;
         mask to_left = at_left < ratio;
@@ -112,9 +106,7 @@ real soft_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, real k,
     real ratio_before = (real)1e30f, ratio_last = (real)1e30f, d_last = 0.0f;
     real omega = 1.6f, step = 0.0f;
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
-#if FEATURE_COUNT
-        count_evaluations(COUNT_SHADOWS, active, 1.0f, params);
-#endif
+        COUNT_EVALUATIONS(COUNT_SHADOWS, active, 1.0f);
         real d = distance_estimate(v3_add(origin, v3_scale(to_light, t)), params);
         real ratio = d / t;
         visible = SELECT(visible, min(visible, k * ratio), active);
@@ -122,9 +114,7 @@ real soft_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, real k,
         mask sampled = active & !overshot;
         mask dip = sampled & (ratio_last <= ratio_before) & (ratio_last <= ratio) & (k * ratio_last < 2.0f);
         if (ANY(dip)) {
-#if FEATURE_COUNT
-            count_scope(dip, params);
-#endif
+            COUNT_SCOPE(dip);
             real lowest = lowest_ratio(origin, to_light, t_before, t_last, t, ratio_last, params);
             visible = SELECT(visible, min(visible, k * lowest), dip);
         }

@@ -1,0 +1,110 @@
+// Sphere tracing of LANES rays at once; a lane stops on a hit (distance
+// below the threshold, or <= 0 at the start: a camera inside a solid hits at
+// t = 0), past MAX_DISTANCE, or after MAX_STEPS. `jitter` in [0, 1) shortens
+// the first step by that fraction (dithering against banding, Syntopia part
+// II: steps and glow then vary smoothly between neighbouring pixels). A
+// `packet` of rays (the camera's, uniform) is cone-marched first.
+march_result march_rays(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real jitter, int packet,
+                        __constant scalar *params) {
+    march_result r;
+    r.t = 0.0f;
+    r.hit = (mask)0;
+    r.steps = 0.0f;
+    r.d = 0.0f;
+#if FEATURE_GLOW
+    r.closest = (real)MAX_DISTANCE;
+#endif
+#if FEATURE_OVERRELAX
+    // Over-relaxed sphere tracing (Keinert et al. 2014): steps of
+    // OVERRELAX * d while successive unbounding spheres overlap; when they
+    // do not, the lane steps back and marches plainly from there on.
+    real omega = (real)OVERRELAX;
+    real previous_radius = 0.0f, step = 0.0f;
+#endif
+#if FEATURE_SCENE_BOUND
+    // Rays start where they enter the scene's bounding sphere and miss once
+    // they leave it: the empty space around the scene costs no evaluation.
+    real t_exit;
+    vec3 centre;
+    real radius = scene_bound(params, &centre);
+    // widened by the hit threshold at its far side: rays that pass within
+    // the threshold of the scene hit it, bound or not
+    radius = radius + hit_threshold(v3_length(v3_sub(origin, centre)) + radius, pixel_angle);
+    mask in_bound = ray_sphere_span(origin, dir, centre, radius, &r.t, &t_exit);
+#if FEATURE_SCENE_HALF_SPACES
+    // The scene's ground half-spaces lie outside the sphere: a ray that may
+    // meet one is marched from its start to MAX_DISTANCE, as unbounded.
+    mask clear = clear_of_half_spaces(origin, dir, hit_threshold(0.0f, pixel_angle), params);
+    r.t = SELECT((real)0.0f, r.t, clear);
+    t_exit = SELECT((real)MAX_DISTANCE, t_exit, clear);
+    in_bound = in_bound | !clear;
+#endif
+    active = active & in_bound;
+#endif
+    int first_step = 0;     // a ray's steps before its own: its cone's
+#if FEATURE_CONE
+    if (packet) {
+        int cone_steps;
+        real t_last = (real)MAX_DISTANCE;
+#if FEATURE_SCENE_BOUND
+        t_last = t_exit;
+#endif
+        r.t = max(r.t, cone_start(origin, dir, active, r.t, t_last, pixel_angle, &cone_steps, params));
+        r.steps = SELECT((real)0.0f, (real)cone_steps, active);
+        first_step = cone_steps;
+        active = active & (r.t <= t_last);
+    }
+#endif
+    for (int i = first_step; i < MAX_STEPS && ANY(active); i++) {
+        COUNT_EVALUATIONS(march_purpose(params), active, 1.0f);
+        real d = distance_estimate(v3_add(origin, v3_scale(dir, r.t)), params);
+        r.steps = r.steps + SELECT((real)0.0f, (real)1.0f, active);
+#if FEATURE_OVERRELAX
+        // a long step that lands inside a solid (d < 0) overshot too
+        mask overshot = active & (omega > 1.0f) & ((fabs(d) + previous_radius < step) | (d < 0.0f));
+        if (ANY(overshot)) {
+            // back to the previous point (its distance was previous_radius),
+            // to step plainly from there
+            r.t = SELECT(r.t, r.t - step, overshot);
+            d = SELECT(d, previous_radius, overshot);
+            omega = SELECT(omega, (real)1.0f, overshot);
+        }
+        previous_radius = fabs(d);
+#endif
+#if FEATURE_GLOW
+        r.closest = SELECT(r.closest, min(r.closest, d), active);
+#endif
+        mask close = (d < hit_threshold(r.t, pixel_angle)) | (d <= 0.0f);
+        r.hit = r.hit | (active & close);
+#if FEATURE_FORWARD_NORMALS
+        r.d = SELECT(r.d, d, active & close);
+#endif
+        active = active & !close;
+#if FEATURE_DITHER
+        if (i == first_step)
+            d = d * (1.0f - jitter);
+#endif
+#if FEATURE_OVERRELAX
+        step = d * omega;
+        r.t = SELECT(r.t, r.t + step, active);
+#else
+        r.t = SELECT(r.t, r.t + d, active);
+#endif
+        active = active & (r.t < (real)MAX_DISTANCE);
+#if FEATURE_SCENE_BOUND
+        active = active & (r.t <= t_exit);
+#endif
+    }
+    return r;
+}
+
+march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real jitter,
+                   __constant scalar *params) {
+    return march_rays(origin, dir, active, pixel_angle, jitter, 0, params);
+}
+
+// The camera's rays through a work-item's pixels: a packet.
+march_result march_camera(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real jitter,
+                          __constant scalar *params) {
+    return march_rays(origin, dir, active, pixel_angle, jitter, 1, params);
+}
