@@ -16,7 +16,7 @@ import textwrap
 from dataclasses import dataclass
 
 from . import ir, pathtrace
-from .lower import POINT, SceneIR
+from .lower import SceneIR
 from .schedule import ForBlock, Hoist, IfBlock, schedule, varying
 from .passes import PASSES, SHADING_PASSES, channels
 from .lights import LIGHT_KINDS, MAX_RADIANCE
