@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from . import ir, pathtrace, ranges
 from .hoist import DERIVED_SLOTS, Hoisted, hoist
-from .lower import POINT, SceneIR
+from .lower import SceneIR
 from .types import FLOAT_MAX
 from .schedule import ForBlock, Hoist, IfBlock, schedule, varying
 from .passes import PASSES, SHADING_PASSES, channels

@@ -712,7 +712,7 @@ class _FastParser:
 
     def arguments(self) -> tuple[ast.Arg, ...]:
         """A call's arguments, up to its ')'; self.depth is the deepest."""
-        kinds, texts = self.kinds, self.texts
+        kinds = self.kinds
         args, depth = [], 0
         while kinds[self.i] != ")":
             i = self.i
