@@ -18,7 +18,7 @@ import pytest
 import fractalc
 from fractalc import build as build_module
 from fractalc import run as run_module
-from fractalc.devices import open_device
+from fractalc.devices import default_device, list_devices, open_device
 from fractalc.emit import Target, emit
 from fractalc.lower import lower
 
@@ -637,9 +637,9 @@ STANDALONE_RUNNER = textwrap.dedent("""\
     slots = int(re.search(r"fills the\\s+(?://\\s+)?(\\d+) slots", source).group(1))
     params = np.array([*spec["params"], *[0.0] * slots], dtype=scalar)
 
-    # fractalc's default device: the first GPU, else the first device
-    devices = [d for platform in cl.get_platforms() for d in platform.get_devices()]
-    device = next((d for d in devices if d.type & cl.device_type.GPU), devices[0])
+    # the device fractalc rendered on, by its platform's and its own name
+    device = next(d for platform in cl.get_platforms() if platform.name == spec["platform"]
+                  for d in platform.get_devices() if d.name == spec["device"])
     context = cl.Context([device])
     queue = cl.CommandQueue(context)
     program = cl.Program(context, source).build()
@@ -684,7 +684,11 @@ def test_standalone_kernel_matches_fractalc_render(tmp_path):
     assert "#include" not in source
 
     camera = dict(position=(2.5, -3.5, 1.8), target=(0, 0, 0.6), up=(0, 0, 1), fov=42)
-    (tmp_path / "spec.json").write_text(json.dumps({**camera, "width": W, "height": H, "params": [1.1]}))
+    # listing the devices registers the drivers fractalc brings, for this
+    # process and the runner (as an embedder's loader would list them)
+    rendered_on = default_device(list_devices())
+    (tmp_path / "spec.json").write_text(json.dumps({**camera, "width": W, "height": H, "params": [1.1],
+                                                    "platform": rendered_on.platform, "device": rendered_on.name}))
     (tmp_path / "runner.py").write_text(STANDALONE_RUNNER)
     # the runner sees neither the repository nor an installed fractalc
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "FRACTALC_DEVICE")}
