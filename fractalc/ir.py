@@ -593,6 +593,50 @@ def transform(roots: tuple, rewrite: Callable) -> tuple:
     return tuple(made[r] for r in roots)
 
 
+def without_idle_carries(roots: tuple) -> tuple:
+    """`roots` with every loop's carried values that never change (the next
+    value is the carried one itself, or the constant it starts as) replaced
+    by that constant and no longer carried: a carry costs a select per
+    iteration, and the guards the range analysis removes leave such carries
+    behind (a `stopped` flag that cannot be set, an offset that stays 0)."""
+    kept_index: dict = {}       # new loop -> {old index: new index}
+    constant: dict = {}         # new loop -> {old index: its constant}
+
+    def idle(loop: Loop, i: int) -> bool:
+        start, step = loop.init[i], loop.next[i]
+        if not is_const(start):
+            return False
+        itself = isinstance(step, State) and (step.level, step.index) == (loop.level, i)
+        return itself or (is_const(step) and step.value == start.value)
+
+    def rewrite(node, rebuilt):
+        if isinstance(rebuilt, Loop):
+            still = [i for i in range(len(rebuilt.init)) if not idle(rebuilt, i)]
+            if len(still) in (0, len(rebuilt.init)):
+                return rebuilt
+            renumbered = {old: new for new, old in enumerate(still)}
+            fixed = {i: rebuilt.init[i] for i in range(len(rebuilt.init)) if i not in renumbered}
+
+            def in_body(_, body):
+                if isinstance(body, State) and body.level == rebuilt.level:
+                    return fixed[body.index] if body.index in fixed else \
+                        State(body.level, renumbered[body.index], body.type)
+                return body
+            condition = () if rebuilt.condition is None else (rebuilt.condition,)
+            body = transform(tuple(rebuilt.next[i] for i in still) + condition, in_body)
+            loop = Loop(rebuilt.level, tuple(rebuilt.init[i] for i in still), body[:len(still)],
+                        body[len(still)] if condition else None, rebuilt.count)
+            kept_index[loop], constant[loop] = renumbered, fixed
+            return loop
+        if isinstance(rebuilt, Out) and rebuilt.source in kept_index:
+            loop = rebuilt.source
+            if rebuilt.index in constant[loop]:
+                return constant[loop][rebuilt.index]
+            return Out(loop, kept_index[loop][rebuilt.index], rebuilt.type)
+        return rebuilt
+    return transform(tuple(roots), rewrite)
+
+
 def state_levels(roots) -> dict:
     """For every node under `roots`, the loop levels whose States it
     depends on (a loop's own level not counted for its results)."""

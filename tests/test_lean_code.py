@@ -115,3 +115,20 @@ def test_whole_powers_are_products(n, products):
     points = np.array([[1.1, 0, 0], [-1.3, 0, 0], [0, 0, 0]])
     assert np.allclose(ir.evaluate_at((power,), points)[0], points[:, 0] ** n, rtol=1e-14)
     assert ir.op("pow", x, ir.const(2.5)).op == "pow"
+
+
+def test_carries_that_never_change_are_not_carried():
+    x = ir.Comp(ir.Var("p", ir.VEC3), 0)
+    z, offset, limit = ir.State(0, 0), ir.State(0, 1), ir.State(0, 2)
+    # z = z^2 + x while |z| < limit; the offset keeps its start, the limit is set to its start again
+    loop = ir.Loop(0, (x, ir.const(0.25), ir.const(2.0)), (ir.op("+", ir.mul(z, z), x), offset, ir.const(2.0)),
+                   ir.op("lt", ir.op("abs", z), limit), ir.const(6.0))
+    result = ir.op("+", ir.Out(loop, 0), ir.Out(loop, 1))
+    (lean,) = ir.without_idle_carries((result,))
+    (carried,) = {node for node in ir.walk(lean) if isinstance(node, ir.Loop)}
+    assert len(carried.init) == 1
+    points = np.array([[0.1, 0, 0], [-1.5, 0, 0], [0.3, 0, 0], [1.9, 0, 0]])
+    assert np.array_equal(ir.evaluate_at((lean,), points)[0], ir.evaluate_at((result,), points)[0])
+    # the Mandelbulb's loop, once its guards are gone, carries z and dr alone
+    body = _function(fractalc.loads(BULB).kernel_source(lanes=8), "distance_estimate")
+    assert not re.search(r"\bn\d+ = s\d+;", body), body
