@@ -34,9 +34,11 @@ def main(rounds: int, path: str) -> None:
     frame = run.Frame(settings.width, settings.height, settings.samples, 0, run.camera_block(scene.checked.camera))
     params = list(scene.params.values())
 
+    kernels = {id(program): run.RenderKernel(program, scene.device, scene.lanes_in_use, scene.precision == "double")
+               for program in programs}
+
     def render(program):
-        return run.render(program, scene.device, frame, params, scene.lanes_in_use, scene.precision == "double",
-                          None, channels(settings.aovs))
+        return kernels[id(program)].render(frame, params, None, channels(settings.aovs))
 
     images = [render(program) for program in programs]
     times = [[] for _ in VARIANTS]

@@ -150,7 +150,7 @@ def _guard(action: str):
 
 def render_arguments(out, params, camera, frame: Frame, x0: int, y0: int, pitch: int) -> tuple:
     """The render kernel's arguments after its global size, in the order
-    of its parameters (stdlib_cl/raymarch.cl): the output, the params' and
+    of its parameters (stdlib_cl/engine/render.cl): the output, the params' and
     camera's buffers, then the frame and the launch's place in it."""
     return (out, params, camera, np.int32(frame.width), np.int32(frame.height), np.int32(x0), np.int32(y0),
             np.int32(pitch), np.int32(frame.samples), np.uint32(frame.seed))
