@@ -1,19 +1,18 @@
 """`fractalc bench --count`: distance evaluations per pixel, by purpose.
 
-The counting build is the scene's kernel with the engine's and library's
-`COUNT_` hooks kept (emit.Target.count; normal kernels hold no
-trace of them) and three edits to its text made here: `params` becomes a
-__global buffer, whose values are followed by a work-item's counters
-(stdlib_cl/count.cl, placed before the scene's functions), and each formula
-loop of the distance estimate counts its iterations for the rays being
-evaluated. A ray counts where it is marched (its lane of the mask), not
+The counting build is the scene's kernel emitted with the counting hooks
+(emit.Target.count: the engine's and library's `COUNT_` hooks kept, and
+each formula loop of the distance estimate counting its iterations for the
+rays being evaluated; normal kernels hold no trace of them) and two edits
+to its text made here: `params` becomes a __global buffer, whose values are
+followed by a work-item's counters, and stdlib_cl/count.cl is placed
+before the scene's functions. A ray counts where it is marched (its lane of the mask), not
 where a vector evaluates it along with rays that are done, so the counts are
 those of one ray per work-item, the same on every machine, and the same
 from run to run (no atomics: each work-item owns its counters).
 """
 from __future__ import annotations
 
-import re
 import statistics
 import time
 from dataclasses import dataclass, replace
@@ -34,9 +33,6 @@ COUNT_SLOTS = BOOKKEEPING_SLOTS + len(PURPOSES) + 1
 
 _SCENE_MARK = "// ---- the scene"
 _PARAMS = "__constant scalar *params"
-_LOOP_EXIT = re.compile(r"^(\s*)if \(!ANY\((\w+)\)\) break;$")
-_FIXED_LOOP = re.compile(r"^(\s*)for \(int \w+ = 0; .*\) \{$")
-_RAY_BRANCH = re.compile(r"^(\s*)if \(ANY\((\w+)\)\) \{$")
 
 
 @dataclass(frozen=True)
@@ -81,48 +77,7 @@ def counting_source(source: str, param_count: int, double: bool) -> str:
     helpers = (resource_dir("stdlib_cl") / "count.cl").read_text()
     helpers = f"#define COUNT_BASE {param_count + DERIVED_SLOTS}\n" + (double_literals(helpers) if double else helpers)
     head, mark, scene = source.partition(_SCENE_MARK)
-    return (head + helpers + "\n" + mark + _counted_iterations(scene)).replace(_PARAMS, "__global scalar *params")
-
-
-def _counted_iterations(scene: str) -> str:
-    """The scene's text with each loop of `distance_estimate` counting its
-    iterations: those of the rays still iterating (past the loop's exit test)
-    inside every per-ray branch around it."""
-    lines, out = scene.split("\n"), []
-    inside, branches = False, []    # branches: (indent, mask) of the open per-ray branches
-    for i, line in enumerate(lines):
-        out.append(line)
-        if line.startswith("real distance_estimate("):
-            inside = True
-        elif inside and line == "}":
-            return "\n".join(out + lines[i + 1:])
-        if not inside:
-            continue
-        indent = len(line) - len(line.lstrip())
-        while branches and line.strip() == "}" and indent == branches[-1][0]:
-            branches.pop()
-        branch = _RAY_BRANCH.match(line)
-        if branch:
-            branches.append((len(branch.group(1)), branch.group(2)))
-        rays = " & ".join(["MASK_TRUE"] + [m for _, m in branches])
-        exit_test = _LOOP_EXIT.match(line)
-        if exit_test:
-            out.append(f"{exit_test.group(1)}count_iterations({exit_test.group(2)} & {rays}, params);")
-        fixed = _FIXED_LOOP.match(line)
-        if fixed and not _declares_exit_first(lines, i):
-            out.append(f"{fixed.group(1)}    count_iterations({rays}, params);")
-    return "\n".join(out)
-
-
-def _declares_exit_first(lines: list[str], i: int) -> bool:
-    """Whether the loop opening at line i has an exit test (before its
-    first nested block): its iterations are counted there."""
-    for line in lines[i + 1:]:
-        if _LOOP_EXIT.match(line):
-            return True
-        if line.rstrip().endswith("{") or line.strip() == "}":
-            return False
-    return False
+    return (head + helpers + "\n" + mark + scene).replace(_PARAMS, "__global scalar *params")
 
 
 def count(scene, width: int | None = None, height: int | None = None, camera=None, timed_frames: int = 0) -> Counts:

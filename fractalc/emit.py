@@ -70,8 +70,12 @@ class _FunctionWriter:
     arguments are widened where C's overloads need one type. Inside a loop,
     a per-ray branch runs only for the rays still iterating."""
 
-    def __init__(self, root: ir.Expr):
+    def __init__(self, root: ir.Expr, counting: bool = False):
         self.root = root
+        # the counting build: each loop counts the iterations of its rays
+        # (COUNT_ITERATIONS, stdlib_cl/count.cl) within the per-ray branches
+        # open around it (`rays`: their masks)
+        self.counting, self.rays = counting, []
         self.uses: dict = {}
         for node in ir.walk(root):
             for child in ir.children(node):
@@ -129,6 +133,9 @@ class _FunctionWriter:
             self.statements(block.condition, inside)
             self.lines += [f"{inside}{active} = {active} & {self.text[node.condition]};",
                            f"{inside}if (!ANY({active})) break;"]
+        if self.counting:
+            counted = " & ".join([active] * (active is not None) + ["MASK_TRUE", *self.rays])
+            self.lines.append(f"{inside}COUNT_ITERATIONS({counted});")
         self.active.append(active)
         self.statements(block.body, inside)
         self.active.pop()
@@ -155,7 +162,9 @@ class _FunctionWriter:
             if self.depth[node.condition] or stopped:
                 condition = self.declare("mask", condition, indent)
             self.lines.append(f"{indent}if (ANY({condition})) {{")
+            self.rays.append(condition)
             self.statements(block.then, inside)
+            self.rays.pop()
             self.lines += [f"{inside}{name} = SELECT({name}, {self.argument(e)}, {condition});"
                            for name, e in zip(names, node.then)]
         else:
@@ -266,9 +275,10 @@ class _FunctionWriter:
         return f"{signature} {{\n{body}{chr(10) if body else ''}    return {result};\n}}"
 
 
-def function_source(root: ir.Expr, signature: str) -> str:
-    """A C function of the point computing `root`."""
-    return _FunctionWriter(root).write(signature)
+def function_source(root: ir.Expr, signature: str, counting: bool = False) -> str:
+    """A C function of the point computing `root` (`counting`: with the
+    counting build's hooks of its loops' iterations)."""
+    return _FunctionWriter(root, counting).write(signature)
 
 
 def _calls(root) -> list[str]:
@@ -661,7 +671,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         lib.prelude,
         _library_text(scene_functions),
         "// ---- the scene " + "-" * 60,
-        distance,
+        function_source(scene_ir.distance, DISTANCE_SIGNATURE, counting=True) if target.count else distance,
         _scalar_copies(lib, scene_functions if on["CONE"] else (), distance if on["CONE"] else "",
                        hoisted.derived, len(scene.params)),
         _surface_function(scene_ir), bound,

@@ -2,7 +2,9 @@
 // engine and the library call its hooks, COUNT_EVALUATIONS before each
 // distance evaluation, COUNT_MARCH before a march, COUNT_SCOPE before a
 // function that serves the rays of a mask (a normal, AO); each hook is a
-// line of its own, which the emitter drops from every other kernel. Only
+// line of its own, which the emitter drops from every other kernel. The
+// emitter writes COUNT_ITERATIONS into each loop of the distance estimate
+// of this build alone. Only
 // this build has them: there `params` is a __global buffer whose values
 // are followed, from COUNT_BASE, by COUNT_SLOTS reals (one per ray) per
 // work-item. Rays are counted where they are marched (their lanes of a
@@ -28,6 +30,7 @@
 #define COUNT_EVALUATIONS(purpose, rays, each) count_evaluations(purpose, rays, each, params)
 #define COUNT_MARCH(purpose) count_march_purpose(purpose, params)
 #define COUNT_SCOPE(rays) count_scope(rays, params)
+#define COUNT_ITERATIONS(rays) count_iterations(rays, params)
 
 __global scalar *count_slots(__global scalar *params) {
     size_t item = get_global_id(1) * get_global_size(0) + get_global_id(0);
