@@ -374,19 +374,17 @@ class Renderer:
         """The frame: an (H, W, channels) float32 array (run.CHANNELS, then
         the passes' channels); `progress(pixels)` after each tile."""
         kernel = self.kernel
-
-        def render_pass(frame):
-            return kernel.render(frame, self.params, progress, self.channels)
-        return pathtrace.render_passes(render_pass, self.frame) if self.path_traced else render_pass(self.frame)
+        return self._over_passes(lambda frame: kernel.render(frame, self.params, progress, self.channels))
 
     def rows(self, first: int, count: int) -> np.ndarray:
         """Rows `first` to `first + count - 1` of the frame: a (count, W,
         channels) float32 array, equal to those rows of `pixels`."""
         kernel = self.kernel
+        return self._over_passes(lambda frame: kernel.rows(frame, self.params, first, count, self.channels))
 
-        def render_pass(frame):
-            return kernel.rows(frame, self.params, first, count, self.channels)
-        # the path tracer's passes, as a whole frame's: the same pixels
+    def _over_passes(self, render_pass: Callable[[run.Frame], np.ndarray]) -> np.ndarray:
+        """`render_pass` over the frame: once, or over the path tracer's
+        passes as a whole frame's are (so rows and frame give the same pixels)."""
         return pathtrace.render_passes(render_pass, self.frame) if self.path_traced else render_pass(self.frame)
 
     def image(self, pixels: np.ndarray, seconds: float) -> Image:

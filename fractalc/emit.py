@@ -712,7 +712,7 @@ def _derived_kernel(derived: tuple[ir.Expr, ...], first: int) -> str:
     writer = _FunctionWriter(ir.Vec(derived))
     writer.block(writer.root, "    ")
     stores = [_scene_template("derived_store", slot=first + i, value=writer.text[v]) for i, v in enumerate(derived)]
-    return _scene_template("derived_params", lines="".join(line + "\n" for line in [*writer.lines, *stores]))
+    return _scene_template("derived_params", lines=_body([*writer.lines, *stores]))
 
 
 def _scalar_copies(lib, functions, distance: str, derived: tuple[ir.Expr, ...], first: int) -> str:
