@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from . import ir, pathtrace, ranges
 from .hoist import DERIVED_SLOTS, Hoisted, hoist
-from .lower import SceneIR
+from .lower import Bound, SceneIR
 from .types import FLOAT_MAX
 from .schedule import ForBlock, Hoist, IfBlock, schedule, varying
 from .passes import PASSES, SHADING_PASSES, channels
@@ -320,6 +320,13 @@ def _bound_expressions(bound) -> tuple[ir.Expr, ...]:
     return (*centre, radius, *_half_space_expressions(half_spaces))
 
 
+def _bound_with(bound: Bound, values: tuple[ir.Expr, ...]) -> Bound:
+    """`bound` with its expressions replaced by `values`, in the order of
+    `_bound_expressions`."""
+    centre, radius, rest = tuple(values[:3]), values[3], values[4:]
+    return Bound((centre, radius), tuple((tuple(rest[i:i + 3]), rest[i + 3]) for i in range(0, len(rest), 4)))
+
+
 def _bound_function(scene_ir: SceneIR, with_half_spaces: bool) -> str:
     """`scene_bound`: the radius and (through `centre`) the centre of a
     sphere holding the whole scene but its ground half-spaces; uniform, so
@@ -608,7 +615,7 @@ def uniform_source(values: tuple[ir.Expr, ...], double: bool) -> str:
     return double_literals(source) if double else source
 
 
-DISTANCE_SIGNATURE = "real distance_estimate(vec3 p, __constant scalar *params)"
+DISTANCE_SIGNATURE = "ALWAYS_INLINE real distance_estimate(vec3 p, __constant scalar *params)"
 
 
 def emit_distance(scene_ir: SceneIR, target: Target = Target()) -> str:
@@ -639,8 +646,13 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
     """The complete OpenCL program for a lowered scene."""
     lib = library()
     scene = scene_ir.scene
-    hoisted = _lean((scene_ir.distance, *scene_ir.surface.items()), scene_ir)
-    scene_ir = dataclasses.replace(scene_ir, distance=hoisted.roots[0], surface=type(scene_ir.surface)(*hoisted.roots[1:]))
+    # the bound too: its radius is often the fractal's, a derived param already
+    bound_values = _bound_expressions(scene_ir.bound) if scene_ir.bound is not None else ()
+    hoisted = _lean((scene_ir.distance, *scene_ir.surface.items(), *bound_values), scene_ir)
+    surface_end = 1 + len(scene_ir.surface.items())
+    scene_ir = dataclasses.replace(
+        scene_ir, distance=hoisted.roots[0], surface=type(scene_ir.surface)(*hoisted.roots[1:surface_end]),
+        bound=_bound_with(scene_ir.bound, hoisted.roots[surface_end:]) if bound_values else scene_ir.bound)
     distance = function_source(scene_ir.distance, DISTANCE_SIGNATURE)
     on = features(scene_ir)
     on = {**on, "CONE": on["CONE"] and target.lanes > 1, "COUNT": target.count}
@@ -691,7 +703,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
 _UNIFORM_NAMES = {"real": "scalar", "mask": "int", "lane_int": "int", "lane_uint": "uint", "lane_float": "float",
                   "vec3": "uvec3", "MASK_TRUE": "1", "ANY": "", "ALL": "", "SELECT": "UNIFORM_SELECT",
                   "TO_REAL": "(scalar)", "TO_FLOAT": "(float)", "TO_UINT": "(uint)"}
-_FUNCTION_NAME = re.compile(r"^\w+ (\w+)\(", re.M)
+_FUNCTION_NAME = re.compile(r"^(?:ALWAYS_INLINE )?\w+ (\w+)\(", re.M)
 _IDENTIFIER = re.compile(r"\b[A-Za-z_]\w*\b")
 
 

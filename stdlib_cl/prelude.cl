@@ -81,6 +81,11 @@ typedef CONCAT(float, LANES) lane_float;
 #define sincos(x, cosine) (*(cosine) = native_cos(x), native_sin(x))
 #endif
 
+// A function every caller takes in whole: the scene's distance estimate
+// (PoCL 3.1 otherwise calls it, passing its lanes through memory: 6% of
+// bulb-640's frame; docs/performance.md)
+#define ALWAYS_INLINE __attribute__((always_inline))
+
 typedef struct { real x, y, z; } vec3;
 
 vec3 v3(real x, real y, real z) { vec3 v = { x, y, z }; return v; }

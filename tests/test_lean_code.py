@@ -21,7 +21,7 @@ render { width: 64, height: 48 }
 
 def _function(source: str, name: str) -> str:
     """The text of the C function `name` (its signature to its closing brace)."""
-    found = re.search(rf"^(\w+ )?{name}\(.*?^}}", source, re.M | re.S)
+    found = re.search(rf"^(\w+ )*{name}\(.*?^}}", source, re.M | re.S)
     assert found, name
     return found.group(0)
 
@@ -42,6 +42,25 @@ def test_param_only_values_leave_the_estimate(lanes):
     kernel = _function(source, "__kernel void derived_params")
     assert re.search(r"\b\w*mandelbulb_bound_radius\(", kernel)
     assert re.search(r"\b(sin|cos)\(", kernel)
+
+
+@pytest.mark.parametrize("lanes", [1, 8])
+def test_the_scene_bound_and_the_shading_compute_no_power(lanes):
+    # the bound radius pow(2, 1 / (power - 1)) is the estimate's derived
+    # param; Blinn-Phong's highlight is exp2 of a log2 (PoCL's pow costs
+    # ten times as much)
+    source = fractalc.loads(BULB + "light directional { direction: (0, 0, -1) }").kernel_source(lanes=lanes)
+    kernel = source[:source.index("__kernel void derived_params")] + source[source.index("uvec3;"):]
+    assert "pow(" not in re.sub(r"^scalar uniform_\w+\(.*?^}", "", kernel, flags=re.M | re.S)
+    bound = _function(source, "scene_bound")
+    assert re.search(r"return \(real\)params\[\d+\];", bound), bound
+
+
+def test_the_estimate_is_inlined_into_its_callers():
+    # PoCL calls it otherwise, its vectors passed through memory
+    source = fractalc.loads(BULB).kernel_source(lanes=8)
+    assert re.search(r"^ALWAYS_INLINE real distance_estimate\(", source, re.M)
+    assert "#define ALWAYS_INLINE __attribute__((always_inline))" in source
 
 
 def test_distance_program_hoists_too():

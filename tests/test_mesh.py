@@ -143,7 +143,7 @@ def test_solid_with_a_minimum_volume_keeps_loose_bodies_but_not_those_inside_a_v
 def test_the_mandelbulb_meshes_to_one_solid():
     # its mesh holds many tiny voids and specks inside them (at 128 cells:
     # 348 surfaces, 333 of them voids), which slicers flag
-    raw = fractalc.loads("scene mandelbulb()\n").mesh(resolution=48)
+    raw = fractalc.loads("scene mandelbulb()\n").mesh(resolution=52)
     _, volumes = raw.shells()
     assert (volumes < 0).sum() >= 3 and (volumes > 0).sum() >= 3
     solid, removed = raw.solid()

@@ -34,12 +34,13 @@ vec3 central_normal(vec3 p, real h, __constant scalar *params) {
 }
 
 // Blinn-Phong: (albedo * max(n.l, 0) + specular * max(n.h, 0)^shininess)
-// times the light's radiance (colour * intensity * visibility).
+// times the light's radiance (colour * intensity * visibility). The power
+// as exp2(s log2 x), x > 0: PoCL's pow costs about ten times as much.
 vec3 blinn_phong(vec3 normal, vec3 to_light, vec3 to_eye, vec3 albedo,
                  real specular, real shininess, vec3 radiance) {
     real diffuse = max(v3_dot(normal, to_light), 0.0f);
     vec3 halfway = v3_normalize(v3_add(to_light, to_eye));
-    real highlight = specular * pow(max(v3_dot(normal, halfway), 1e-6f), shininess);
+    real highlight = specular * exp2(shininess * log2(max(v3_dot(normal, halfway), 1e-6f)));
     highlight = SELECT((real)0.0f, highlight, diffuse > 0.0f);
     return v3_mul(v3_add(v3_scale(albedo, diffuse), v3(highlight, highlight, highlight)), radiance);
 }
