@@ -48,8 +48,9 @@ def launches(scene, width: int, height: int):
     group = device.work_group
     step_x, step_y = (block_width * group[0], block_height * group[1]) if group else (block_width, block_height)
     pitch, rows = -(-width // step_x) * step_x, -(-height // step_y) * step_y
-    tile_width = -(-min(run.TILE_WIDTH, pitch) // step_x) * step_x
-    tile_height = -(-min(run.TILE_HEIGHT, rows) // step_y) * step_y
+    most_columns, most_lines = run.tile_size(device)
+    tile_width = -(-min(most_columns, pitch) // step_x) * step_x
+    tile_height = -(-min(most_lines, rows) // step_y) * step_y
     flags = cl.mem_flags
     camera = np.array(run.camera_block(scene.checked.camera), dtype=scalar)
     # the params and the derived params after them, as the kernel reads them

@@ -27,7 +27,7 @@ from .build import build
 from .check import check, check_param_values, check_value, unknown_param
 from .cluster import render_still
 from .denoise import denoise_image, require_denoiser
-from .devices import open_device
+from .devices import open_device, refines_rsqrt
 from .emit import Target, emit, emit_distance, uniform_source
 from .errors import RenderError, SceneError, diagnostic
 from .image import Image, image_from_pixels, require_image_memory
@@ -168,7 +168,8 @@ class Scene:
             if double and not device.info.double:
                 raise RenderError(f"the OpenCL device '{device.info.name}' does not support double precision")
             self._targets[settings.precision] = Target(lanes=self.lanes_in_use, double=double,
-                                                       exact_native=device.lane_choice.native_exact)
+                                                       exact_native=device.lane_choice.native_exact,
+                                                       refined_rsqrt=refines_rsqrt(device.info))
         return self._targets[settings.precision]
 
     @property

@@ -71,11 +71,25 @@ def _version(text: str) -> tuple[int, ...]:
     return tuple(int(part) for part in re.findall(r"\d+", text)[:3])
 
 
+def is_intel_cpu(info: DeviceInfo) -> bool:
+    """Intel's OpenCL CPU runtime."""
+    return "Intel" in info.platform and info.kind == "CPU"
+
+
+def refines_rsqrt(info: DeviceInfo) -> bool:
+    """Whether float kernels take rsqrt as native_rsqrt and one Newton step
+    (emit.Target.refined_rsqrt, REFINED_RSQRT in stdlib_cl/prelude.cl): on
+    Intel's CPU runtime, whose exact rsqrt is a library call (bulb-640 4.6%
+    faster there; on PoCL, whose rsqrt is inline, the step costs 6% of a
+    distance estimate; docs/performance.md)."""
+    return is_intel_cpu(info)
+
+
 def speed_rank(info: DeviceInfo) -> tuple:
     """Sort key of the default choice (see the module docstring): smaller is
     faster."""
     kind = {"GPU": 0, "CPU": 1}.get(info.kind, 2)
-    if "Intel" in info.platform and info.kind == "CPU":
+    if is_intel_cpu(info):
         driver = 0
     elif "PoCL" in info.platform_version or "Portable Computing Language" in info.platform:
         driver = 1

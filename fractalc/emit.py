@@ -36,6 +36,7 @@ class Target:
     double: bool = False    # `real` is double
     exact_native: bool = False  # the device's native_ functions are exact (lanes.LaneChoice.native_exact)
     count: bool = False     # the counting build's hooks kept (stdlib_cl/count.cl, fractalc/count.py)
+    refined_rsqrt: bool = False  # rsqrt as native_rsqrt and a Newton step (devices.refines_rsqrt)
 
 
 def literal(value: float) -> str:
@@ -52,6 +53,9 @@ _C_TYPES = {ir.REAL: "real", ir.VEC3: "vec3", ir.INT: "lane_int", ir.MASK: "mask
 _UNIFORM_C_TYPES = {ir.REAL: "scalar", ir.INT: "int", ir.MASK: "int"}
 _TEMP_PREFIX = {"real": "r", "vec3": "q", "lane_int": "id", "mask": "m", "scalar": "u", "int": "k"}
 _C_AXES = "xyz"
+# operations rendered as OpenCL functions that take one type throughout: a
+# uniform argument beside a per-ray one is widened to `real`
+_OVERLOADED = ("min", "max", "min_of_numbers", "max_of_numbers", "abs")
 # Expressions nest at most this deep before a temporary is named: clang
 # refuses more than 256 nested brackets, and each level costs up to four
 # (SELECT expands to a call with parenthesised arguments)
@@ -249,7 +253,7 @@ class _FunctionWriter:
             return f"({self.text[condition]} ? {value(if_true)} : {value(if_false)})"
         render = ir.OPS[node.op].c
         if render is not None:
-            args = [value(a) if node.op in ("min", "max", "abs") else self.text[a] for a in node.args]
+            args = [value(a) if node.op in _OVERLOADED else self.text[a] for a in node.args]
             return render(*args)
         return f"{node.op}({', '.join(value(a) for a in node.args)})"
 
@@ -553,9 +557,12 @@ def lane_block(lanes: int) -> tuple[int, int]:
 
 
 def _arithmetic_constants(scene_ir: SceneIR, target: Target) -> str:
-    """What the prelude reads: the lanes, the precision, the math functions."""
+    """What the prelude reads: the lanes, the precision, the math functions
+    (the refined rsqrt where no native_ functions replace it, in float)."""
+    native = fast_math(scene_ir.scene.render.fast_math, target)
+    refined = target.refined_rsqrt and not native and not target.double
     return "\n".join([f"#define LANES {target.lanes}", f"#define PRECISION_DOUBLE {int(target.double)}",
-                      f"#define FAST_MATH {int(fast_math(scene_ir.scene.render.fast_math, target))}"])
+                      f"#define FAST_MATH {int(native)}", f"#define REFINED_RSQRT {int(refined)}"])
 
 
 def _constants(scene_ir: SceneIR, target: Target, on: dict[str, bool]) -> str:

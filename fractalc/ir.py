@@ -231,6 +231,14 @@ OPS: dict[str, OpRule] = {
                   lambda a, b, da, db: op("select", op("lt", b, a), db, da)),
     "max": OpRule(2, max, REAL, lambda a, b: f"fmax({a}, {b})",
                   lambda a, b, da, db: op("select", op("lt", a, b), db, da)),
+    # min and max of operands that cannot be NaN (the range analysis proves
+    # it and rewrites min and max into these, fractalc/ranges.py): OpenCL's
+    # min and max, which a CPU computes in one instruction where the
+    # NaN-aware fmin and fmax take three
+    "min_of_numbers": OpRule(2, min, REAL, lambda a, b: f"min({a}, {b})",
+                             lambda a, b, da, db: op("select", op("lt", b, a), db, da)),
+    "max_of_numbers": OpRule(2, max, REAL, lambda a, b: f"max({a}, {b})",
+                             lambda a, b, da, db: op("select", op("lt", a, b), db, da)),
     "pow": OpRule(2, math.pow, REAL, None, _d_pow),
     "exp": OpRule(1, math.exp, REAL, None, lambda a, da: mul(op("exp", a), da)),
     "log": OpRule(1, math.log, REAL, None, lambda a, da: div(da, a)),

@@ -229,13 +229,19 @@ def _within(x: Range, low: Range, high: Range) -> Range:
     return x.meet(promised) if x.low <= promised.high and promised.low <= x.high else promised
 
 
+# the operations that give one of their arguments, by kind
+_PICKING = {"min": "min", "min_of_numbers": "min", "max": "max", "max_of_numbers": "max", "clamp": "clamp"}
+# min and max of arguments that cannot be NaN: their plain forms (ir.OPS)
+_OF_NUMBERS = {"min": "min_of_numbers", "max": "max_of_numbers"}
+
 RULES = {
     "+": _add, "-": lambda a, b: _add(a, _neg(b)), "*": _mul, "/": _div, "neg": _neg,
     "sin": _bounded(-1.0, 1.0), "cos": _bounded(-1.0, 1.0), "tan": lambda a: FULL,
     "asin": _bounded(-math.pi / 2, math.pi / 2, 1.0), "acos": _bounded(0.0, math.pi, 1.0),
     "atan": lambda a: Range(-math.pi / 2, math.pi / 2, a.nan),
     "atan2": lambda a, b: Range(-math.pi, math.pi, a.nan or b.nan),
-    "sqrt": _sqrt, "rsqrt": _rsqrt, "abs": _abs, "min": _min, "max": _max, "pow": _pow, "exp": _exp,
+    "sqrt": _sqrt, "rsqrt": _rsqrt, "abs": _abs, "min": _min, "max": _max, "min_of_numbers": _min,
+    "max_of_numbers": _max, "pow": _pow, "exp": _exp,
     "log": _log, "floor": _floor, "round": lambda a: _add(_floor(a), Range(0.0, 1.0)), "clamp": _clamp,
     "mix": lambda a, b, t: _add(a, _mul(_add(b, _neg(a)), t)),
     "radians": _scaled(math.pi / 180.0), "degrees": _scaled(180.0 / math.pi),
@@ -333,7 +339,7 @@ class _Analysis:
             args = [memo[a] for a in node.args]
             if node.op == "*" and node.args[0] is node.args[1]:
                 return _mul(args[0], args[0], same=True)
-            if node.op in ("min", "max", "clamp"):
+            if node.op in _PICKING:
                 self.pick(node, args)
             return RULES[node.op](*args)
         if isinstance(node, ir.Branch):
@@ -346,9 +352,9 @@ class _Analysis:
         """Which argument a min, max or clamp certainly gives here (-1: none)."""
         def below(a: Range, b: Range) -> bool:     # a <= b for sure (a tie only away from +-0)
             return not a.nan and (a.high < b.low or (a.high == b.low and a.high != 0.0))
-        if node.op == "min":
+        if _PICKING[node.op] == "min":
             found = 0 if below(args[0], args[1]) else 1 if below(args[1], args[0]) else -1
-        elif node.op == "max":
+        elif _PICKING[node.op] == "max":
             found = 0 if below(args[1], args[0]) else 1 if below(args[0], args[1]) else -1
         else:
             found = 0 if below(args[1], args[0]) and below(args[0], args[2]) else -1
@@ -498,5 +504,8 @@ def simplify(roots: tuple, params: dict) -> tuple:
         if picks is not None and len(picks) == 1 and -1 not in picks and isinstance(rebuilt, ir.Op) \
                 and rebuilt.op == node.op:
             return rebuilt.args[next(iter(picks))]
+        if isinstance(node, ir.Op) and isinstance(rebuilt, ir.Op) and rebuilt.op in _OF_NUMBERS and rebuilt.op == node.op \
+                and all(analysis.seen.get(a) is not None and not analysis.seen[a].nan for a in node.args):
+            return ir.op(_OF_NUMBERS[rebuilt.op], *rebuilt.args)
         return rebuilt
     return ir.transform(tuple(roots), rewrite)

@@ -27,9 +27,19 @@ from .passes import DEFAULT_CHANNELS
 from .program import PROJECTIONS, STEREO_LAYOUTS, Camera
 
 CHANNELS = DEFAULT_CHANNELS   # of a pixel, as in a kernel without extra passes (passes.channels)
-# Tiles: launches of at most this many pixels (GPU watchdogs; progress).
+# Tiles: launches of at most this many pixels (GPU watchdogs; progress). On
+# a CPU, where no watchdog ends a launch, taller ones: each launch costs
+# its start and, at its end, a core waiting for the last work-group
+# (bulb-640 in one launch instead of eight: 3% faster on Intel's runtime,
+# 5% on PoCL; docs/performance.md).
 TILE_WIDTH, TILE_HEIGHT = 1024, 64
+CPU_TILE_HEIGHT = 512
 TILES_IN_FLIGHT = 3
+
+
+def tile_size(device: Device) -> tuple[int, int]:
+    """The largest launch, in pixels, on `device`."""
+    return TILE_WIDTH, TILE_HEIGHT if device.info.kind == "GPU" else CPU_TILE_HEIGHT
 
 
 @dataclass(frozen=True)
@@ -231,7 +241,8 @@ class RenderKernel:
         width, height = frame.width, frame.height
         grid = self.grid
         pitch, rows = grid.padded(width, height)
-        tile_width, tile_height = grid.padded(min(TILE_WIDTH, pitch), min(TILE_HEIGHT, rows))
+        most_columns, most_lines = tile_size(self.device)
+        tile_width, tile_height = grid.padded(min(most_columns, pitch), min(most_lines, rows))
         # a new array per frame: the image returned is this array, which the caller keeps
         image = np.empty((rows, pitch, len(channels)), dtype=np.float32)
         with _guard("rendering"):

@@ -389,6 +389,7 @@ def test_tiles_join_seamlessly(monkeypatch):
     whole = scene.render(width=61, height=37)
     monkeypatch.setattr(run_module, "TILE_WIDTH", 16)
     monkeypatch.setattr(run_module, "TILE_HEIGHT", 10)
+    monkeypatch.setattr(run_module, "CPU_TILE_HEIGHT", 10)
     tiled = scene.render(width=61, height=37)
     for plane in ("rgba", "depth", "normal", "steps"):
         np.testing.assert_array_equal(getattr(tiled, plane), getattr(whole, plane))

@@ -91,7 +91,7 @@ def test_an_interrupted_render_waits_for_the_tiles_it_queued():
 
     queue = RecordingQueue(device.context)
     watched = dataclasses.replace(device, queue=queue)
-    frame = run.Frame(64, 8 * run.TILE_HEIGHT, 1, 0, run.camera_block(scene.checked.camera))
+    frame = run.Frame(64, 8 * run.tile_size(device)[1], 1, 0, run.camera_block(scene.checked.camera))
 
     def interrupt(pixels):
         raise KeyboardInterrupt
