@@ -13,7 +13,8 @@ from .expressions import broadcast, components, require_vector_size
 from .errors import Span
 from .program import (DEFAULT_MATERIAL, Coloring, Combination, CombinationKind, Fractal, ParamCheck, Primitive, Shape,
                       Transformed, WithMaterial, cosine_palette)
-from .stdlib import AUTO_SCALE, COLORINGS, COMBINATORS, MATH, TRANSFORMS, Signature
+from .stdlib import AUTO_SCALE, COLORINGS, COMBINATORS, MATH, Signature
+from .transforms import SIGNATURES as TRANSFORMS
 from .types import FLOAT_MAX, NUMBER_TYPES, TYPE_WORDS, VECTOR_TYPES, Parameter, Type, in_float_range, vector_type
 
 # Parts (primitives, transforms, combinations) a scene may have, counting a

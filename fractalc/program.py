@@ -65,7 +65,7 @@ class Combination:
 
 @dataclass(frozen=True)
 class Transformed:
-    kind: str                   # a key of stdlib.TRANSFORMS other than material/color
+    kind: str                   # a key of transforms.TRANSFORMS
     shape: "Shape"
     args: tuple[ir.Arg, ...]
     span: Span

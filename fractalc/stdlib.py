@@ -14,7 +14,8 @@ ARG is `name: type [= default] [constraint ...]`, with types `num`, `int`,
 `vec3`, `vec4` and `size` (a number or a vec3; a number means all three),
 and constraints `>X`, `>=X`, `<=X`, `<X`, `A..B` (inclusive), `nonzero`, or
 `<=other_arg`. The language-level forms that are not library functions
-(combinators, transforms, math) are tabled below.
+(combinators, colourings, math) are tabled below; transforms are
+fractalc/transforms.py's.
 
 Besides the library: the prelude, the engine (`engine/`, the fixed part of
 every render kernel, ENGINE), the kernel of distances at points, and the
@@ -30,7 +31,7 @@ from functools import lru_cache
 from string import Template
 
 from .resources import resource_dir
-from .types import NONZERO, Parameter, Type, above, at_least, between, parse_constraint
+from .types import Parameter, Type, above, at_least, between, parse_constraint
 
 PRELUDE = "prelude.cl"
 DISTANCE_KERNEL = "distance.cl"
@@ -266,20 +267,6 @@ def _p(name, type_, default=None, *constraints, words=()):
 
 _SMOOTH = (_p("smooth", Type.NUMBER, 0.0, at_least(0)),)
 COMBINATORS = {name: Signature("combinator", name, _SMOOTH) for name in ("union", "intersect", "subtract")}
-
-TRANSFORMS = {
-    "translate": Signature("transform", "translate", (_p("offset", Type.VEC3),)),
-    "rotate": Signature("transform", "rotate", (_p("axis", Type.VEC3, None, NONZERO), _p("degrees", Type.NUMBER))),
-    "scale": Signature("transform", "scale", (_p("factor", Type.NUMBER, None, above(0)),)),
-    "repeat": Signature("transform", "repeat", (_p("period", Type.SIZE, None, at_least(0)),)),
-    "round": Signature("transform", "round", (_p("radius", Type.NUMBER, None, at_least(0)),)),
-    "onion": Signature("transform", "onion", (_p("thickness", Type.NUMBER, None, above(0)),)),
-    "twist": Signature("transform", "twist", (_p("rate", Type.NUMBER),)),
-    "bend": Signature("transform", "bend", (_p("rate", Type.NUMBER),)),
-    "material": Signature("transform", "material", (_p("material", Type.MATERIAL),)),
-    "color": Signature("transform", "color", (_p("rgb", Type.COLOR, None, between(0, 1000)),)),
-}
-
 
 # `.color(orbit_trap(...))`: a fractal coloured by how near its orbit comes
 # to the origin or the coordinate planes (Syntopia part II), from `near`

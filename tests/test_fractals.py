@@ -24,7 +24,7 @@ from test_fractal_library import ball, relative_error, shell, tolerance
 
 PRECISIONS = ("float", "double")
 SQRT3 = np.sqrt(3.0)
-from fractalc.lower import BOUND_MARGIN as MARGIN   # evaluated within (1 + MARGIN) R
+from fractalc.ir import BOUND_MARGIN as MARGIN   # evaluated within (1 + MARGIN) R
 ULP = {"float": np.finfo(np.float32).eps, "double": np.finfo(np.float64).eps}
 
 DEFAULTS = {
