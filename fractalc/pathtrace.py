@@ -12,7 +12,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .lights import LIGHT_STRIDE, MAX_INVERSE_SQUARE, MAX_IRRADIANCE, light_layout, lights_table
+from .lights import LIGHT_KINDS, LIGHT_STRIDE, MAX_INVERSE_SQUARE, MAX_IRRADIANCE, light_layout, lights_table
 from .program import CheckedScene
 from .resources import resource_dir
 
@@ -263,7 +263,7 @@ def source(scene: CheckedScene, literal, transparency: bool) -> str:
                  f"#define MAX_INVERSE_SQUARE {literal(MAX_INVERSE_SQUARE)}",
                  f"#define CAMERA_SEES_ENVIRONMENT {int(render.background != 'transparent')}",
                  f"#define PATH_TRANSPARENCY {int(transparency)}",
-                 f"#define AREA_LIGHTS {int(any(light.kind in ('sphere', 'rectangle') for light in scene.lights))}",
+                 f"#define AREA_LIGHTS {int(any(LIGHT_KINDS[light.kind].area for light in scene.lights))}",
                  f"#define MIS {int(MIS)}",
                  f"#define LIGHT_COUNT {len(rows)}",
                  "__constant scalar LIGHTS[] = {",      # never empty (C has no empty arrays)

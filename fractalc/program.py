@@ -11,6 +11,7 @@ from typing import Union
 
 from . import ir
 from .errors import Diagnostic, Span
+from .lights import LIGHT_KINDS, LightKind
 from .stdlib import Signature
 from .types import (NONZERO, Parameter, Type, above, at_least, at_most, below, between, key, keys_of,
                     range_violation)
@@ -239,14 +240,6 @@ def _cross(a, b):
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-class LightKind(StrEnum):
-    DIRECTIONAL = "directional"
-    POINT = "point"
-    SPOT = "spot"
-    SPHERE = "sphere"
-    RECTANGLE = "rectangle"
-
-
 class Shadows(StrEnum):
     NONE = "none"
     HARD = "hard"
@@ -256,7 +249,7 @@ class Shadows(StrEnum):
 def light_vector_key(kind: str) -> str:
     """The key of a light block that `Light.vector` holds: the way a
     directional light travels, any other light's position."""
-    return "direction" if kind == LightKind.DIRECTIONAL else "position"
+    return "direction" if LIGHT_KINDS[kind].directional else "position"
 
 
 @dataclass(frozen=True)
@@ -300,20 +293,13 @@ class Light:
         return math.cos(inner), math.cos(min(inner + math.radians(self.falloff), math.pi))
 
 
-# A light block's keys by kind, in the order messages list them: the
-# Light's fields, a position (Light.vector) and, for an aimed light, a
-# target instead of its direction.
+# A light block's keys by kind (lights.LIGHT_KINDS: in the order messages
+# list them): the Light's fields, a position (Light.vector) and, for an
+# aimed light, a target instead of its direction.
 _LIGHT_PLACE = (Parameter("position", Type.VEC3), Parameter("target", Type.VEC3))
-_LIGHT_COMMON = ("color", "intensity", "shadows", "softness")
-_LIGHT_KEY_NAMES = {
-    LightKind.DIRECTIONAL: ("direction", *_LIGHT_COMMON),
-    LightKind.POINT: ("position", *_LIGHT_COMMON),
-    LightKind.SPOT: ("position", "direction", "target", *_LIGHT_COMMON, "angle", "falloff"),
-    LightKind.SPHERE: ("position", "radius", *_LIGHT_COMMON),
-    LightKind.RECTANGLE: ("position", "direction", "target", "width", "height", *_LIGHT_COMMON),
-}
 _ALL_LIGHT_KEYS = keys_of(Light, *_LIGHT_PLACE)
-LIGHT_KEYS = {kind: {name: _ALL_LIGHT_KEYS[name] for name in names} for kind, names in _LIGHT_KEY_NAMES.items()}
+LIGHT_KEYS = {LightKind(word): {name: _ALL_LIGHT_KEYS[name] for name in kind.keys}
+              for word, kind in LIGHT_KINDS.items()}
 
 
 @dataclass(frozen=True)
