@@ -124,26 +124,27 @@ class _FunctionWriter:
         active = None
         if node.condition is not None:
             active = self.declare("mask", "MASK_TRUE", indent, "a")
-        self.lines.append(f"{indent}for (int {counter} = 0; {counter} < {count}; {counter}++) {{")
+        self.write_statement("loop", indent, counter=counter, count=count)
         inside, outside = indent + "    ", dict(self.text)
         for i, e in enumerate(node.init):
             self.text[ir.State(node.level, i, e.type)] = names[i]
             self.depth[ir.State(node.level, i, e.type)] = 0
         if active is not None:
             self.statements(block.condition, inside)
-            self.lines += [f"{inside}{active} = {active} & {self.text[node.condition]};",
-                           f"{inside}if (!ANY({active})) break;"]
+            self.write_statement("loop_condition", inside, active=active, condition=self.text[node.condition])
         if self.counting:
             counted = " & ".join([active] * (active is not None) + ["MASK_TRUE", *self.rays])
-            self.lines.append(f"{inside}COUNT_ITERATIONS({counted});")
+            self.write_statement("count_iterations", inside, rays=counted)
         self.active.append(active)
         self.statements(block.body, inside)
         self.active.pop()
         updates = [self.declare(_C_TYPES[e.type], self.argument(e), inside, "n") for e in node.next]
         for name, update in zip(names, updates):
-            value = update if active is None else f"SELECT({name}, {update}, {active})"
-            self.lines.append(f"{inside}{name} = {value};")
-        self.lines.append(f"{indent}}}")
+            if active is None:
+                self.write_statement("assign", inside, name=name, value=update)
+            else:
+                self.write_statement("assign_selected", inside, name=name, value=update, mask=active)
+        self.write_statement("end", indent)
         self.text = outside
         self.text[node] = names
         self.depth[node] = 0
@@ -161,23 +162,26 @@ class _FunctionWriter:
                 condition = " & ".join([condition, *stopped])
             if self.depth[node.condition] or stopped:
                 condition = self.declare("mask", condition, indent)
-            self.lines.append(f"{indent}if (ANY({condition})) {{")
+            self.write_statement("if_any", indent, condition=condition)
             self.rays.append(condition)
             self.statements(block.then, inside)
             self.rays.pop()
-            self.lines += [f"{inside}{name} = SELECT({name}, {self.argument(e)}, {condition});"
-                           for name, e in zip(names, node.then)]
+            for name, e in zip(names, node.then):
+                self.write_statement("assign_selected", inside, name=name, value=self.argument(e), mask=condition)
         else:
             names = [self.fresh("b") for _ in types]
-            self.lines += [f"{indent}{t} {name};" for t, name in zip(types, names)]
-            self.lines.append(f"{indent}if ({condition}) {{")
+            for t, name in zip(types, names):
+                self.write_statement("declare_unset", indent, type=t, name=name)
+            self.write_statement("if", indent, condition=condition)
             self.statements(block.then, inside)
-            self.lines += [f"{inside}{name} = {self.argument(e)};" for name, e in zip(names, node.then)]
+            for name, e in zip(names, node.then):
+                self.write_statement("assign", inside, name=name, value=self.argument(e))
             self.text = dict(outside)
-            self.lines.append(f"{indent}}} else {{")
+            self.write_statement("else", indent)
             self.statements(block.otherwise, inside)
-            self.lines += [f"{inside}{name} = {self.argument(e)};" for name, e in zip(names, node.otherwise)]
-        self.lines.append(f"{indent}}}")
+            for name, e in zip(names, node.otherwise):
+                self.write_statement("assign", inside, name=name, value=self.argument(e))
+        self.write_statement("end", indent)
         self.text = outside
         self.text[node] = names
         self.depth[node] = 0
@@ -265,14 +269,17 @@ class _FunctionWriter:
 
     def declare(self, c_type: str, text: str, indent: str, prefix: str | None = None) -> str:
         name = self.fresh(prefix or _TEMP_PREFIX[c_type])
-        self.lines.append(f"{indent}{c_type} {name} = {text};")
+        self.write_statement("declare", indent, type=c_type, name=name, value=text)
         return name
+
+    def write_statement(self, template: str, indent: str, **values: str) -> None:
+        """The statement `template` of stdlib_cl/statements.cl with `values`, at the depth of `indent`."""
+        self.lines += [indent + line for line in templates("statements.cl")[template].substitute(values).split("\n")]
 
     def write(self, signature: str) -> str:
         self.block(self.root, "    ")
-        body = "\n".join(self.lines)
-        result = self.argument(self.root)
-        return f"{signature} {{\n{body}{chr(10) if body else ''}    return {result};\n}}"
+        return templates("statements.cl")["function"].substitute(signature=signature, body=_body(self.lines),
+                                                                 result=self.argument(self.root))
 
 
 def function_source(root: ir.Expr, signature: str, counting: bool = False) -> str:
@@ -608,9 +615,6 @@ def uniform_source(values: tuple[ir.Expr, ...], double: bool) -> str:
     return double_literals(source) if double else source
 
 
-DISTANCE_SIGNATURE = "real distance_estimate(vec3 p, __constant scalar *params)"
-
-
 def emit_distance(scene_ir: SceneIR, target: Target = Target()) -> str:
     """A program of the scene's distance estimate alone, with the kernel
     `distance_at_points`: what sampling the estimate needs (Scene.distance,
@@ -627,7 +631,7 @@ def emit_distance(scene_ir: SceneIR, target: Target = Target()) -> str:
         lib.prelude,
         _library_text(lib.closure(_calls(hoisted.roots[0]))),
         "// ---- the scene " + "-" * 60,
-        function_source(hoisted.roots[0], DISTANCE_SIGNATURE),
+        function_source(hoisted.roots[0], _scene_template("distance_signature")),
         _scalar_copies(lib, (), "", hoisted.derived, len(scene.params)),
         lib.distance_kernel,
     ]
@@ -641,7 +645,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
     scene = scene_ir.scene
     hoisted = _lean((scene_ir.distance, *scene_ir.surface.items()), scene_ir)
     scene_ir = dataclasses.replace(scene_ir, distance=hoisted.roots[0], surface=type(scene_ir.surface)(*hoisted.roots[1:]))
-    distance = function_source(scene_ir.distance, DISTANCE_SIGNATURE)
+    distance = function_source(scene_ir.distance, _scene_template("distance_signature"))
     on = features(scene_ir)
     on = {**on, "CONE": on["CONE"] and target.lanes > 1, "COUNT": target.count}
     shade, shading_needs = _shade_function(scene_ir, on)
@@ -671,7 +675,8 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         lib.prelude,
         _library_text(scene_functions),
         "// ---- the scene " + "-" * 60,
-        function_source(scene_ir.distance, DISTANCE_SIGNATURE, counting=True) if target.count else distance,
+        function_source(scene_ir.distance, _scene_template("distance_signature"), counting=True)
+        if target.count else distance,
         _scalar_copies(lib, scene_functions if on["CONE"] else (), distance if on["CONE"] else "",
                        hoisted.derived, len(scene.params)),
         _surface_function(scene_ir), bound,

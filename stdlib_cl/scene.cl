@@ -1,7 +1,11 @@
 // Templates of the functions the emitter writes from a scene's IR
 // (fractalc/emit.py) around the statements computing it: `$body` is those
-// statements, each line ending in a newline. A `//@ NAME` line opens the
-// template NAME (fractalc/stdlib.py `templates`).
+// statements, each line ending in a newline; and of the tables of values it
+// writes (fractalc/pathtrace.py). A `//@ NAME` line opens the template NAME
+// (fractalc/stdlib.py `templates`).
+
+//@ distance_signature  the scene's distance estimate at a point, which the engine and distance_at_points call
+real distance_estimate(vec3 p, __constant scalar *params)
 
 //@ surface_at  the surface properties at a point: the nearest part's material
 typedef struct { real $fields; } surface;
@@ -111,3 +115,13 @@ ${text}
 #define LANES 1
 #define PRECISION_DOUBLE ${double}
 #define FAST_MATH 0
+
+//@ float_table  values the kernel reads by index (the environment's), `$values` separated by commas
+__constant float $name[] = {$values};
+
+//@ lights_table  the path tracer's lights (fractalc/lights.py), `$rows` each ending in a newline; never empty (C has no empty arrays)
+__constant scalar LIGHTS[] = {
+${rows}};
+
+//@ lights_row  a light's LIGHT_STRIDE values, separated by commas
+    $values,
