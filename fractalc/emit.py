@@ -583,6 +583,8 @@ def _constants(scene_ir: SceneIR, target: Target, on: dict[str, bool]) -> str:
         f"#define LANE_X {lane_vector([i % width for i in range(lanes)])}",
         f"#define LANE_Y {lane_vector([i // width for i in range(lanes)])}",
         *_effect_constants(render, on),
+        # the counting build's counters follow the params and the derived slots (stdlib_cl/count.cl)
+        *([f"#define COUNT_BASE {len(scene_ir.scene.params) + DERIVED_SLOTS}"] if target.count else []),
     ])
 
 
@@ -673,6 +675,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
                         scalar=scalar, params=params, slots=DERIVED_SLOTS) + "\n",
         _constants(scene_ir, target, on),
         lib.prelude,
+        lib.counting if target.count else "",
         _library_text(scene_functions),
         "// ---- the scene " + "-" * 60,
         function_source(scene_ir.distance, _scene_template("distance_signature"), counting=True)

@@ -35,6 +35,7 @@ from .types import Parameter, Type, above, at_least, between, parse_constraint
 
 PRELUDE = "prelude.cl"
 DISTANCE_KERNEL = "distance.cl"
+COUNTING = "count.cl"
 # The engine: the fixed part of every render kernel, one file per concern
 # in stdlib_cl/engine/, in the order the kernel holds them (each after what
 # it uses); its `#if FEATURE_` blocks hold the optional effects.
@@ -125,7 +126,8 @@ def _parameter_types(source: str) -> tuple[str, ...]:
     """C types of a definition's parameters (`real`, `int`, `vec3`, ...)."""
     code = "\n".join(line for line in source.splitlines() if not line.startswith("//"))
     inside = code[code.index("(") + 1:code.index(")")]
-    return tuple(" ".join(p.split()[:-1]).replace("__constant ", "") for p in inside.split(",") if p.strip())
+    return tuple(" ".join(p.split()[:-1]).replace("__constant ", "").replace("PARAMS_SPACE ", "")
+                 for p in inside.split(",") if p.strip())
 
 
 def _signatures(lines: list[str], function: str) -> dict[str, Signature]:
@@ -192,6 +194,7 @@ class Library:
     prelude: str
     engine: str             # the files of ENGINE, in order
     distance_kernel: str    # `distance_at_points`, for render programs and distance programs alike
+    counting: str           # the counting build's hooks (fractalc/count.py), after the prelude in that build alone
 
     def closure(self, roots) -> list[Function]:
         """The functions `roots` need, each after the ones it calls."""
@@ -234,7 +237,8 @@ def library() -> Library:
     signatures = {name: replace(sig, bound_radius=name + BOUND_RADIUS) if name + BOUND_RADIUS in functions else sig
                   for name, sig in signatures.items()}
     engine = "\n\n".join((root / ENGINE_DIR / f"{name}.cl").read_text().rstrip("\n") for name in ENGINE)
-    return Library(with_calls, signatures, (root / PRELUDE).read_text(), engine, (root / DISTANCE_KERNEL).read_text())
+    return Library(with_calls, signatures, (root / PRELUDE).read_text(), engine, (root / DISTANCE_KERNEL).read_text(),
+                   (root / COUNTING).read_text())
 
 
 _TEMPLATE_START = "//@ "

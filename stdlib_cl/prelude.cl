@@ -81,6 +81,10 @@ typedef CONCAT(float, LANES) lane_float;
 #define sincos(x, cosine) (*(cosine) = native_cos(x), native_sin(x))
 #endif
 
+// The params buffer's address space: the counting build (count.cl) makes it
+// __global, for the counters that follow the params there
+#define PARAMS_SPACE __constant
+
 typedef struct { real x, y, z; } vec3;
 
 vec3 v3(real x, real y, real z) { vec3 v = { x, y, z }; return v; }
