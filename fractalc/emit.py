@@ -18,11 +18,11 @@ from dataclasses import dataclass
 from . import ir, pathtrace, ranges
 from .hoist import DERIVED_SLOTS, Hoisted, hoist
 from .lower import SceneIR
-from .types import FLOAT_MAX
+from .types import FLOAT_MAX, Feature, Parameter, Type, keys_of
 from .schedule import ForBlock, Hoist, IfBlock, schedule, varying
 from .passes import PASSES, SHADING_PASSES, channels
 from .lights import LIGHT_KINDS, MAX_RADIANCE
-from .program import Light
+from .program import CAMERA_KEYS, RENDER_KEYS, Light
 from .stdlib import library, templates
 from .version import __version__
 
@@ -450,57 +450,68 @@ def _shade_function(scene_ir: SceneIR, on: dict[str, bool]) -> tuple[str, list[s
     return "\n".join(lines), sorted(needs)
 
 
+def _kernel_keys(scene) -> list[tuple[Parameter, object, Feature | None]]:
+    """Each camera and render key (a block's keys in its place) with its
+    value (None: its block is absent) and its block's feature (None: none)."""
+    found = []
+    for keys, values in ((CAMERA_KEYS, scene.camera), (RENDER_KEYS, scene.render)):
+        for name, parameter in keys.items():
+            value = getattr(values, name)
+            if parameter.block is None:
+                found.append((parameter, value, None))
+                continue
+            inner = keys_of(parameter.block)
+            block_feature = next((p.feature for p in inner.values() if p.feature is not None), None)
+            found += [(p, None if value is None else getattr(value, p.name), block_feature) for p in inner.values()]
+    return found
+
+
 def features(scene_ir: SceneIR) -> dict[str, bool]:
-    """The template's optional effects, on where the scene uses them."""
-    render, camera, surface, bound = scene_ir.scene.render, scene_ir.scene.camera, scene_ir.surface, scene_ir.bound
+    """The template's optional effects, on where the scene uses them: the
+    features its keys declare (Parameter.feature), then what the scene's
+    shape, materials and passes need."""
+    render, surface, bound = scene_ir.scene.render, scene_ir.surface, scene_ir.bound
+    keys = _kernel_keys(scene_ir.scene)
+    on = {p.feature.name: value is not None and p.feature.on(value) for p, value, _ in keys if p.feature is not None}
+    # glow and step-count AO show the plain march (its closest approach,
+    # its steps), which a feature that alters the march would skip through
+    if on["GLOW"] or (render.ao > 0 and render.ao_method == "steps"):
+        on.update({p.feature.name: False for p, _, _ in keys if p.feature is not None and p.feature.alters_march})
     bounded, half_spaces = bound is not None, bound is not None and bool(bound.half_spaces)
-    transparent = not (ir.is_const(surface.transparency) and surface.transparency.value == 0)
-    glow = render.glow is not None and render.glow.strength > 0
-    step_ao = render.ao > 0 and render.ao_method == "steps"
     return {
-        "GLOW": glow,
-        "FOG": render.fog is not None and render.fog.density > 0,
-        "DITHER": render.dither > 0,
-        "REFLECTIONS": render.reflections > 0,
-        "DEPTH_OF_FIELD": camera.aperture > 0,
-        "TRANSPARENCY": transparent,
-        # glow and step-count AO show the plain march (its closest approach,
-        # its steps), which longer steps would skip through
-        "OVERRELAX": render.overrelax > 1 and not glow and not step_ao,
-        # a packet's cone (CPU lanes only: emit() clears it for one ray per
-        # work-item) skips what glow and step-count AO read, as above
-        "CONE": render.cone_marching == "on" and not glow and not step_ao,
-        # the march keeps its last estimate for the normal that reuses it
-        "FORWARD_NORMALS": render.normals == "forward",
+        **on,
+        "TRANSPARENCY": not (ir.is_const(surface.transparency) and surface.transparency.value == 0),
         # glow needs every miss's closest approach, so misses must be marched
-        "SCENE_BOUND": bounded and not glow,
-        "SCENE_HALF_SPACES": bounded and half_spaces and not glow,
-        "TRANSPARENT_BACKGROUND": render.background == "transparent",
+        "SCENE_BOUND": bounded and not on["GLOW"],
+        "SCENE_HALF_SPACES": bounded and half_spaces and not on["GLOW"],
         # the passes asked for beyond the default channels (run.PASSES)
         **{f"PASS_{name.upper()}": name in render.aovs for name in PASSES},
         "SHADING_PASSES": bool(set(SHADING_PASSES) & set(render.aovs)),
-        "PATH_TRACE": render.integrator == "path",
         "ENVIRONMENT": pathtrace.uses_environment(render),
     }
 
 
-def _effect_constants(render, on: dict[str, bool]) -> list[str]:
+def _key_constants(scene, on: dict[str, bool]) -> list[str]:
+    """The #defines of the keys' values the kernel reads (Parameter.constant),
+    each where its feature is on: numbers as float literals, whole numbers
+    and truths as integers, colours as NAME_R, NAME_G, NAME_B."""
     lines = []
-    if on["GLOW"]:
-        glow = render.glow
-        lines += [*(f"#define GLOW_{c} {literal(v)}" for c, v in zip("RGB", glow.color)),
-                  f"#define GLOW_STRENGTH {literal(glow.strength)}", f"#define GLOW_RADIUS {literal(glow.radius)}"]
-    if on["FOG"]:
-        lines += [*(f"#define FOG_{c} {literal(v)}" for c, v in zip("RGB", render.fog.color)),
-                  f"#define FOG_DENSITY {literal(render.fog.density)}"]
-    if on["DITHER"]:
-        lines.append(f"#define DITHER {literal(render.dither)}")
-    if on["OVERRELAX"]:
-        lines.append(f"#define OVERRELAX {literal(render.overrelax)}")
-    if on["REFLECTIONS"]:
-        lines.append(f"#define REFLECTIONS {render.reflections}")
-    if on["ENVIRONMENT"]:
-        lines += pathtrace.environment_constants(render, literal)
+    for parameter, value, block_feature in _kernel_keys(scene):
+        constant = parameter.constant
+        if constant is None:
+            continue
+        gate = None if constant.always else constant.when or parameter.feature or block_feature
+        if gate is not None and not on[gate.name]:
+            continue
+        if constant.values is not None:
+            values = constant.values(value)
+        else:
+            values = {constant.name: {Type.WHOLE: int, Type.NUMBER: float, Type.VEC3: tuple}[parameter.type](value)}
+        for name, v in values.items():
+            if isinstance(v, tuple):
+                lines += [f"#define {name}_{c} {literal(x)}" for c, x in zip("RGB", v)]
+            else:
+                lines.append(f"#define {name} {int(v) if isinstance(v, (bool, int)) else literal(v)}")
     return lines
 
 
@@ -565,24 +576,17 @@ def _constants(scene_ir: SceneIR, target: Target, on: dict[str, bool]) -> str:
 
     def lane_vector(values):
         return "0.0f" if lanes == 1 else f"((real)({', '.join(literal(v) for v in values)}))"
-    pixel = render.epsilon == "pixel"
-    background = (0.0, 0.0, 0.0) if render.background == "transparent" else render.background
     names = channels(render.aovs)
     return "\n".join([
         _arithmetic_constants(scene_ir, target),
-        f"#define MAX_STEPS {render.max_steps}",
-        f"#define MAX_DISTANCE {literal(render.max_distance)}",
-        f"#define HIT_EPSILON_IS_PIXEL {int(pixel)}",
-        f"#define HIT_EPSILON {literal(0.0 if pixel else render.epsilon)}",
-        f"#define EPSILON_SCALE {literal(render.epsilon_scale)}",
-        *(f"#define BACKGROUND_{c} {literal(v)}" for c, v in zip("RGB", background)),
+        *_key_constants(scene_ir.scene, on),
         f"#define CHANNELS {len(names)}",
         *(f"#define CHANNEL_{_channel_macro(name)} {i}" for i, name in enumerate(names)),
         f"#define LANES_X {width}",
         f"#define LANES_Y {height}",
         f"#define LANE_X {lane_vector([i % width for i in range(lanes)])}",
         f"#define LANE_Y {lane_vector([i // width for i in range(lanes)])}",
-        *_effect_constants(render, on),
+        *(pathtrace.environment_constants(render, literal) if on["ENVIRONMENT"] else []),
         # the counting build's counters follow the params and the derived slots (stdlib_cl/count.cl)
         *([f"#define COUNT_BASE {len(scene_ir.scene.params) + DERIVED_SLOTS}"] if target.count else []),
     ])

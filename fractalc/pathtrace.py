@@ -264,7 +264,7 @@ def source(scene: CheckedScene, literal, transparency: bool) -> str:
     whether some material is transparent (the template's FEATURE_TRANSPARENCY)."""
     render = scene.render
     rows = lights_table(scene)
-    constants = [f"#define BOUNCES {render.bounces}", *light_layout(),
+    constants = [*light_layout(),
                  f"#define MAX_INVERSE_SQUARE {literal(MAX_INVERSE_SQUARE)}",
                  f"#define CAMERA_SEES_ENVIRONMENT {int(render.background != 'transparent')}",
                  f"#define PATH_TRANSPARENCY {int(transparency)}",
