@@ -239,6 +239,11 @@ class Parameter:
         return None
 
 
+def empty_range(low: float, high: float) -> str:
+    """The message of a declared range [low, high] with low > high."""
+    return f"the range [{low:g}, {high:g}] is empty"
+
+
 def range_violation(name: str, value: float, low: float | None, high: float | None) -> str | None:
     """A declared param's (or formula parameter's) value outside its range [low, high]."""
     if (low is not None and value < low) or (high is not None and value > high):
