@@ -10,6 +10,8 @@ from fractalc import stdlib
 from fractalc.emit import resolve_features
 from fractalc.resources import resource_dir
 
+pytestmark = pytest.mark.emit
+
 
 def test_the_engine_lists_every_file_of_its_folder_once():
     folder = resource_dir("stdlib_cl") / stdlib.ENGINE_DIR

@@ -9,6 +9,8 @@ from fractalc.expressions import broadcast
 from fractalc.parse import parse
 from fractalc.types import Type
 
+pytestmark = pytest.mark.check
+
 
 def _message(text: str) -> str:
     with pytest.raises(SceneError) as raised:

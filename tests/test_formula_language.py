@@ -17,6 +17,8 @@ from fractalc.check import library_formulas
 from fractalc.errors import SceneError
 from fractalc.parse import parse
 
+pytestmark = pytest.mark.check
+
 POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
 
 

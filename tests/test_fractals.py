@@ -25,6 +25,8 @@ from test_fractal_library import ball, relative_error, shell, tolerance
 PRECISIONS = ("float", "double")
 SQRT3 = np.sqrt(3.0)
 from fractalc.ir import BOUND_MARGIN as MARGIN   # evaluated within (1 + MARGIN) R
+
+pytestmark = pytest.mark.emit
 ULP = {"float": np.finfo(np.float32).eps, "double": np.finfo(np.float64).eps}
 
 DEFAULTS = {

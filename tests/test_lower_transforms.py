@@ -12,6 +12,8 @@ from fractalc import ir, lower, transforms
 
 import fractalc
 
+pytestmark = pytest.mark.emit
+
 
 def test_every_transform_of_the_language_has_its_signature_and_three_lowering_parts():
     parts = [f for f in dataclasses.fields(transforms.Transform)]
