@@ -376,6 +376,7 @@ class Integrator(StrEnum):
 # step, which beyond it can pass float's range on the scene (NaN normals).
 MAX_EPSILON_SCALE = 1000
 
+# The path tracer's part of the kernel: `integrator`'s feature, which `bounces` is written under too
 PATH_TRACE = Feature("PATH_TRACE", lambda integrator: integrator == Integrator.PATH)
 
 

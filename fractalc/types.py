@@ -169,8 +169,9 @@ class Feature:
 @dataclass(frozen=True)
 class Constant:
     """The `#define` lines the kernel reads a key's value by (emit): `name`
-    with the value (a 3-vector as NAME_R, NAME_G, NAME_B), or those
-    `values(value)` gives as {name: value}; written where the feature
+    with the value (of a number, whole number or 3-vector key; a 3-vector
+    as NAME_R, NAME_G, NAME_B), or those `values(value)` gives as
+    {name: value} (numbers, truths, 3-vectors); written where the feature
     `when` is on (None: the key's own feature, or its block's; a key with
     neither, or `always`: in every kernel)."""
     name: str = ""

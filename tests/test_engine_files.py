@@ -59,7 +59,8 @@ def test_each_feature_of_the_kernel_is_declared_once_and_every_block_has_one():
     from fractalc.program import CAMERA_KEYS, RENDER_KEYS
     from fractalc.types import keys_of
     blocks = [keys_of(key.block) for key in RENDER_KEYS.values() if key.block]
-    declared = [key.feature.name for keys in (CAMERA_KEYS, RENDER_KEYS, *blocks) for key in keys.values() if key.feature]
+    declared = [key.feature.name for keys in (CAMERA_KEYS, RENDER_KEYS, *blocks) for key in keys.values()
+                if key.feature]
     assert len(declared) == len(set(declared)) and {"DITHER", "GLOW", "PATH_TRACE", "DEPTH_OF_FIELD"} <= set(declared)
     on = features(lower(fractalc.loads("scene sphere(1)").checked))
     assert set(declared) <= set(on)

@@ -44,9 +44,11 @@ def _in_formula(step: str) -> str:
     ("let v = sin\nscene sphere(1)", "z = z * sin", "'sin' is a function: call it, e.g. 'sin(...)'"),
     ("let v = sin(1, 2)\nscene sphere(1)", "z = z * sin(1, 2)", "'sin' takes 1 argument (sin(x)), not 2"),
     ("let v = sin(x: 1)\nscene sphere(1)", "z = z * sin(x: 1)", "'sin' takes its arguments in order, without names"),
-    ("let v = length(1)\nscene sphere(1)", "z = z * length(1)", "'length' needs a vector here (length(v)), this is a number"),
+    ("let v = length(1)\nscene sphere(1)", "z = z * length(1)",
+     "'length' needs a vector here (length(v)), this is a number"),
     ("let v = log(0)\nscene sphere(1)", "z = z * log(0)", "'log' is undefined for these values"),
-    ("let v = exp(100)\nscene sphere(1)", "z = z * exp(100)", "'exp' gives 2.69e+43, beyond the kernel's floats (3.4e+38)"),
+    ("let v = exp(100)\nscene sphere(1)", "z = z * exp(100)",
+     "'exp' gives 2.69e+43, beyond the kernel's floats (3.4e+38)"),
     ("let v = (1, sphere(1))\nscene sphere(1)", "z = (1, 1 < 2, 3)", None),
 ])
 def test_a_mistake_both_find_reads_the_same_in_a_scene_and_in_a_formula(scene, step, message):

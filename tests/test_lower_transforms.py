@@ -19,7 +19,8 @@ def test_every_transform_of_the_language_has_its_signature_and_three_lowering_pa
     parts = [f for f in dataclasses.fields(transforms.Transform)]
     assert [f.name for f in parts] == ["signature", "point", "distance", "bound"]
     assert all(f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING for f in parts)
-    assert all(t.signature.name == name and t.signature.kind == "transform" for name, t in transforms.TRANSFORMS.items())
+    assert all(t.signature.name == name and t.signature.kind == "transform"
+               for name, t in transforms.TRANSFORMS.items())
     assert set(transforms.SIGNATURES) == {*transforms.TRANSFORMS, "material", "color"}
     with pytest.raises(TypeError):      # no bound update
         transforms.Transform(transforms.TRANSFORMS["twist"].signature, lambda point, args: point,
