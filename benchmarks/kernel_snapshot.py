@@ -29,6 +29,9 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+# this checkout's fractalc, not one installed in the environment (which the
+# script's folder on sys.path would otherwise import: a snapshot of that)
+sys.path.insert(0, str(ROOT))
 TARGETS = {"16f": dict(lanes=16, double=False), "1f": dict(lanes=1, double=False),
            "16d": dict(lanes=16, double=True), "1d": dict(lanes=1, double=True)}
 

@@ -11,6 +11,7 @@ from enum import Enum
 from . import ast, ir, pathtrace
 from .check_base import WORD, CheckerBase, Failed, source_text
 from .errors import Span
+from .lights import LIGHT_KINDS
 from .program import (CAMERA_KEYS, DEFAULT_MATERIAL, LIGHT_KEYS, MATERIAL_KEYS, RENDER_KEYS, Camera, CameraPath,
                       Keyframe, Light, LightKind, Material, Preset, RenderSettings, Shadows, light_vector_key)
 from .types import TYPE_WORDS, Parameter, Type, in_float_range, keys_of
@@ -136,10 +137,9 @@ class BlockChecking(CheckerBase):
                 self.error(given["target"].value.span, f"the {decl.kind} light's target is its position: "
                                                         f"it faces nowhere")
                 return None
-        kind = LightKind(decl.kind)
-        if kind in (LightKind.SPHERE, LightKind.RECTANGLE):    # the direct renderer's stand-in for their soft shadows
+        if LIGHT_KINDS[decl.kind].area:    # the direct renderer's stand-in for their soft shadows
             found.setdefault("shadows", Shadows.SOFT)
-        return Light(kind, vector, **found)
+        return Light(LightKind(decl.kind), vector, **found)
 
     def render(self, decl: ast.RenderDecl | None) -> RenderSettings:
         found = self.entries(decl.block if decl else None, RENDER_KEYS, "render")

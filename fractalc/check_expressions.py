@@ -9,11 +9,14 @@ from . import ast, ir
 from .check_base import (COLORING, ERROR, FORMULA, MATERIAL, NUMBER, SHAPE, WORD, CheckerBase, Failed, Value,
                          default_value, source_text)
 from .check_formulas import LIBRARY
-from .expressions import broadcast, components, require_vector_size
+from .expressions import (argument_count, beyond_floats, broadcast, component_not_number, components,
+                          different_sizes, named_argument, not_numbers, require_vector_size, undefined,
+                          wrong_argument)
 from .errors import Span
 from .program import (DEFAULT_MATERIAL, Coloring, Combination, CombinationKind, Fractal, ParamCheck, Primitive, Shape,
                       Transformed, WithMaterial, cosine_palette)
-from .stdlib import AUTO_SCALE, COLORINGS, COMBINATORS, MATH, TRANSFORMS, Signature
+from .stdlib import AUTO_SCALE, COLORINGS, COMBINATORS, MATH, Signature
+from .transforms import SIGNATURES as TRANSFORMS
 from .types import FLOAT_MAX, NUMBER_TYPES, TYPE_WORDS, VECTOR_TYPES, Parameter, Type, in_float_range, vector_type
 
 # Parts (primitives, transforms, combinations) a scene may have, counting a
@@ -45,7 +48,7 @@ class ExpressionChecking(CheckerBase):
                 return ERROR
             for item, v in zip(e.items, items):
                 if v.type != NUMBER:
-                    self.fail(item.span, f"a vector's components must be numbers, this is {TYPE_WORDS[v.type]}")
+                    self.fail(item.span, component_not_number(v.type))
             self.shared(require_vector_size, e, len(items))
             return Value(vector_type(len(items)), ir.Vec(tuple(v.data for v in items)))
         if isinstance(e, ast.Unary):
@@ -109,19 +112,18 @@ class ExpressionChecking(CheckerBase):
         """Component-wise arithmetic on numbers and vectors; numbers broadcast."""
         for operand in operands:
             if operand.type not in NUMBER_TYPES:
-                self.fail(e.span, f"'{op}' needs numbers or vectors, not {TYPE_WORDS[operand.type]}")
+                self.fail(e.span, not_numbers(op, operand.type))
         combined = broadcast([(o.type, o.data.items if o.type != NUMBER else (o.data,)) for o in operands])
         if combined is None:
-            sizes = sorted({len(o.data) for o in operands if o.type != NUMBER})
-            self.fail(e.span, f"'{op}' on vectors of different sizes ({', '.join(map(str, sizes))})")
+            self.fail(e.span, different_sizes(op, [len(o.data) for o in operands if o.type != NUMBER]))
         size, lanes = combined
         try:
             items = tuple(ir.op(op, *args) for args in zip(*lanes))
         except (ValueError, ZeroDivisionError, OverflowError):
-            self.fail(e.span, f"'{op}' is undefined for these values")
+            self.fail(e.span, undefined(op))
         for item in items:
             if ir.is_const(item) and not in_float_range(item.value):
-                self.fail(e.span, f"'{op}' gives {item.value:.3g}, beyond the kernel's floats ({FLOAT_MAX:.3g})")
+                self.fail(e.span, beyond_floats(op, item.value))
         if size == 1:
             return Value(NUMBER, items[0])
         return Value(vector_type(size), ir.Vec(items))
@@ -270,9 +272,9 @@ class ExpressionChecking(CheckerBase):
         arity = len(function.arguments)
         if any(a.name is not None for a in e.args):
             named = next(a for a in e.args if a.name is not None)
-            self.fail(named.span, f"'{e.name}' takes positional arguments only")
+            self.fail(named.span, named_argument(e.name))
         if len(e.args) != arity:
-            self.fail(e.span, f"'{e.name}' takes {arity} argument{'s' if arity > 1 else ''}, not {len(e.args)}")
+            self.fail(e.span, argument_count(e.name, arity, arity, function.about, len(e.args)))
         values = [self.value_of(a.value) for a in e.args]
         if any(v.type == Type.ERROR for v in values):
             raise Failed
@@ -280,10 +282,10 @@ class ExpressionChecking(CheckerBase):
             return self.arithmetic(e, e.name, values)
         for arg, want, v in zip(e.args, function.arguments, values):
             if v.type not in VECTOR_TYPES or (want == "3" and v.type != Type.VEC3):
-                self.fail(arg.span, f"'{e.name}' needs {'a 3-vector' if want == '3' else 'a vector'}, "
-                                    f"this is {TYPE_WORDS[v.type]}")
+                self.fail(arg.span, wrong_argument(e.name, "a 3-vector" if want == "3" else "a vector", function.about,
+                                                   v.type))
         if len(values) == 2 and len(values[0].data) != len(values[1].data):
-            self.fail(e.span, f"'{e.name}' on vectors of different sizes")
+            self.fail(e.span, different_sizes(e.name, [len(v.data) for v in values]))
         try:
             return vector_math(e.name, [v.data for v in values])
         except (ValueError, ZeroDivisionError):

@@ -14,7 +14,7 @@ from .formula_statements import split
 from .expressions import Mistake
 from .program import Fractal
 from .stdlib import COLORINGS, COMBINATORS, MATH, Signature
-from .types import TYPE_WORDS, Parameter, Type, above, at_most, between, range_violation
+from .types import TYPE_WORDS, Parameter, Type, above, at_most, between, empty_range, range_violation
 
 # Formula steps in one round of a hybrid (each `f() * n` counts n): a round
 # is written out whole in the orbit loop, so the kernel grows with it. On 2
@@ -72,7 +72,7 @@ class FormulaChecking(CheckerBase):
                 if low is None or high is None:
                     return
                 if low > high:
-                    self.error(param.bounds[0].span, f"the range [{low:g}, {high:g}] is empty")
+                    self.error(param.bounds[0].span, empty_range(low, high))
                     return
                 if value.type != NUMBER:
                     self.error(param.bounds[0].span, "a range is for a number parameter")

@@ -7,9 +7,10 @@ from . import ast, ir
 from .check_base import ERROR, MATERIAL, NUMBER, WORD, CheckerBase, Failed, Value
 from .check_formulas import FORMULA_FORMS
 from .errors import Span
+from .expressions import uncalled_function
 from .program import ParamInfo
 from .stdlib import COLORINGS, COMBINATORS, MATH
-from .types import Type
+from .types import Type, empty_range
 
 
 class NameChecking(CheckerBase):
@@ -21,7 +22,7 @@ class NameChecking(CheckerBase):
             high = self.constant_number(decl.bounds[1], "a param's bound")
             if None not in (low, high, default):
                 if low > high:
-                    self.error(decl.bounds[0].span, f"the range [{low:g}, {high:g}] is empty")
+                    self.error(decl.bounds[0].span, empty_range(low, high))
         info = ParamInfo(decl.name, len(self.params), default or 0.0, low, high, decl.span)
         if None not in (low, high, default) and low <= high and info.range_violation(default):
             self.error(decl.default.span, info.range_violation(default))
@@ -90,7 +91,7 @@ class NameChecking(CheckerBase):
             return Value(MATERIAL, e.name)
         if e.name in self.library.signatures or e.name in COMBINATORS or e.name in MATH \
                 or e.name in COLORINGS or e.name in self.formulas or e.name in FORMULA_FORMS:
-            self.fail(e.span, f"'{e.name}' is a function: call it, e.g. '{e.name}()'")
+            self.fail(e.span, uncalled_function(e.name))
         return Value(WORD, e.name)
 
     def unknown_name(self, span: Span, name: str) -> None:

@@ -3,10 +3,10 @@
 The counting build is the scene's kernel emitted with the counting hooks
 (emit.Target.count: the engine's and library's `COUNT_` hooks kept, and
 each formula loop of the distance estimate counting its iterations for the
-rays being evaluated; normal kernels hold no trace of them) and two edits
-to its text made here: `params` becomes a __global buffer, whose values are
-followed by a work-item's counters, and stdlib_cl/count.cl is placed
-before the scene's functions. A ray counts where it is marched (its lane of the mask), not
+rays being evaluated; normal kernels hold no trace of them) and
+stdlib_cl/count.cl after the prelude, which makes `params` a __global
+buffer (PARAMS_SPACE), whose values are followed by a work-item's
+counters. A ray counts where it is marched (its lane of the mask), not
 where a vector evaluates it along with rays that are done, so the counts are
 those of one ray per work-item, the same on every machine, and the same
 from run to run (no atomics: each work-item owns its counters).
@@ -20,19 +20,14 @@ from dataclasses import dataclass, replace
 from . import run
 from .bench import aligned
 from .build import build
-from .emit import double_literals, emit
-from .hoist import DERIVED_SLOTS
+from .emit import emit
 from .lower import lower
-from .resources import resource_dir
 
 # the kernel's purposes, in the order of stdlib_cl/count.cl's COUNT_ constants
 PURPOSES = ("camera", "normals", "shadows", "ao", "reflections", "refraction", "other")
 # a work-item's counters per ray: three bookkeeping slots, then one per purpose, then iterations
 BOOKKEEPING_SLOTS = 3
 COUNT_SLOTS = BOOKKEEPING_SLOTS + len(PURPOSES) + 1
-
-_SCENE_MARK = "// ---- the scene"
-_PARAMS = "__constant scalar *params"
 
 
 @dataclass(frozen=True)
@@ -72,14 +67,6 @@ class Counts:
                 "frame_seconds": self.frame_seconds, "evaluations_per_second": self.per_second}
 
 
-def counting_source(source: str, param_count: int, double: bool) -> str:
-    """The counting build's text of a kernel emitted with Target(count=True)."""
-    helpers = (resource_dir("stdlib_cl") / "count.cl").read_text()
-    helpers = f"#define COUNT_BASE {param_count + DERIVED_SLOTS}\n" + (double_literals(helpers) if double else helpers)
-    head, mark, scene = source.partition(_SCENE_MARK)
-    return (head + helpers + "\n" + mark + scene).replace(_PARAMS, "__global scalar *params")
-
-
 def count(scene, width: int | None = None, height: int | None = None, camera=None, timed_frames: int = 0) -> Counts:
     """Distance evaluations of one render of `scene` (its file's view and
     settings unless given), by purpose, and the formula iterations in them;
@@ -89,9 +76,7 @@ def count(scene, width: int | None = None, height: int | None = None, camera=Non
     settings, params = renderer.settings, renderer.params
     width, height = width or settings.width, height or settings.height
     target = replace(renderer.target, count=True)
-    emitted = emit(lower(replace(scene.checked, render=settings, camera=renderer.camera)), target)
-    source = counting_source(emitted, len(params), target.double)
-    program = build(source, scene.device)
+    program = build(emit(lower(replace(scene.checked, render=settings, camera=renderer.camera)), target), scene.device)
     frame = replace(renderer.frame, width=width, height=height)
     counters = run.counted_render(program, scene.device, frame, params, target.lanes, target.double,
                                   COUNT_SLOTS, len(renderer.channels))

@@ -17,12 +17,13 @@ from dataclasses import dataclass
 
 from . import ir, pathtrace, ranges
 from .hoist import DERIVED_SLOTS, Hoisted, hoist
-from .lower import Bound, SceneIR
-from .types import FLOAT_MAX
+from .lower import SceneIR
+from .transforms import Bound
+from .types import FLOAT_MAX, Feature, Parameter, Type, keys_of
 from .schedule import ForBlock, Hoist, IfBlock, schedule, varying
 from .passes import PASSES, SHADING_PASSES, channels
 from .lights import LIGHT_KINDS, MAX_RADIANCE
-from .program import Light
+from .program import CAMERA_KEYS, RENDER_KEYS, Light
 from .stdlib import library, templates
 from .version import __version__
 
@@ -128,26 +129,27 @@ class _FunctionWriter:
         active = None
         if node.condition is not None:
             active = self.declare("mask", "MASK_TRUE", indent, "a")
-        self.lines.append(f"{indent}for (int {counter} = 0; {counter} < {count}; {counter}++) {{")
+        self.write_statement("loop", indent, counter=counter, count=count)
         inside, outside = indent + "    ", dict(self.text)
         for i, e in enumerate(node.init):
             self.text[ir.State(node.level, i, e.type)] = names[i]
             self.depth[ir.State(node.level, i, e.type)] = 0
         if active is not None:
             self.statements(block.condition, inside)
-            self.lines += [f"{inside}{active} = {active} & {self.text[node.condition]};",
-                           f"{inside}if (!ANY({active})) break;"]
+            self.write_statement("loop_condition", inside, active=active, condition=self.text[node.condition])
         if self.counting:
             counted = " & ".join([active] * (active is not None) + ["MASK_TRUE", *self.rays])
-            self.lines.append(f"{inside}COUNT_ITERATIONS({counted});")
+            self.write_statement("count_iterations", inside, rays=counted)
         self.active.append(active)
         self.statements(block.body, inside)
         self.active.pop()
         updates = [self.declare(_C_TYPES[e.type], self.argument(e), inside, "n") for e in node.next]
         for name, update in zip(names, updates):
-            value = update if active is None else f"SELECT({name}, {update}, {active})"
-            self.lines.append(f"{inside}{name} = {value};")
-        self.lines.append(f"{indent}}}")
+            if active is None:
+                self.write_statement("assign", inside, name=name, value=update)
+            else:
+                self.write_statement("assign_selected", inside, name=name, value=update, mask=active)
+        self.write_statement("end", indent)
         self.text = outside
         self.text[node] = names
         self.depth[node] = 0
@@ -165,23 +167,26 @@ class _FunctionWriter:
                 condition = " & ".join([condition, *stopped])
             if self.depth[node.condition] or stopped:
                 condition = self.declare("mask", condition, indent)
-            self.lines.append(f"{indent}if (ANY({condition})) {{")
+            self.write_statement("if_any", indent, condition=condition)
             self.rays.append(condition)
             self.statements(block.then, inside)
             self.rays.pop()
-            self.lines += [f"{inside}{name} = SELECT({name}, {self.argument(e)}, {condition});"
-                           for name, e in zip(names, node.then)]
+            for name, e in zip(names, node.then):
+                self.write_statement("assign_selected", inside, name=name, value=self.argument(e), mask=condition)
         else:
             names = [self.fresh("b") for _ in types]
-            self.lines += [f"{indent}{t} {name};" for t, name in zip(types, names)]
-            self.lines.append(f"{indent}if ({condition}) {{")
+            for t, name in zip(types, names):
+                self.write_statement("declare_unset", indent, type=t, name=name)
+            self.write_statement("if", indent, condition=condition)
             self.statements(block.then, inside)
-            self.lines += [f"{inside}{name} = {self.argument(e)};" for name, e in zip(names, node.then)]
+            for name, e in zip(names, node.then):
+                self.write_statement("assign", inside, name=name, value=self.argument(e))
             self.text = dict(outside)
-            self.lines.append(f"{indent}}} else {{")
+            self.write_statement("else", indent)
             self.statements(block.otherwise, inside)
-            self.lines += [f"{inside}{name} = {self.argument(e)};" for name, e in zip(names, node.otherwise)]
-        self.lines.append(f"{indent}}}")
+            for name, e in zip(names, node.otherwise):
+                self.write_statement("assign", inside, name=name, value=self.argument(e))
+        self.write_statement("end", indent)
         self.text = outside
         self.text[node] = names
         self.depth[node] = 0
@@ -269,14 +274,17 @@ class _FunctionWriter:
 
     def declare(self, c_type: str, text: str, indent: str, prefix: str | None = None) -> str:
         name = self.fresh(prefix or _TEMP_PREFIX[c_type])
-        self.lines.append(f"{indent}{c_type} {name} = {text};")
+        self.write_statement("declare", indent, type=c_type, name=name, value=text)
         return name
+
+    def write_statement(self, template: str, indent: str, **values: str) -> None:
+        """The statement `template` of stdlib_cl/statements.cl with `values`, at the depth of `indent`."""
+        self.lines += [indent + line for line in templates("statements.cl")[template].substitute(values).split("\n")]
 
     def write(self, signature: str) -> str:
         self.block(self.root, "    ")
-        body = "\n".join(self.lines)
-        result = self.argument(self.root)
-        return f"{signature} {{\n{body}{chr(10) if body else ''}    return {result};\n}}"
+        return templates("statements.cl")["function"].substitute(signature=signature, body=_body(self.lines),
+                                                                 result=self.argument(self.root))
 
 
 def function_source(root: ir.Expr, signature: str, counting: bool = False) -> str:
@@ -454,57 +462,68 @@ def _shade_function(scene_ir: SceneIR, on: dict[str, bool]) -> tuple[str, list[s
     return "\n".join(lines), sorted(needs)
 
 
+def _kernel_keys(scene) -> list[tuple[Parameter, object, Feature | None]]:
+    """Each camera and render key (a block's keys in its place) with its
+    value (None: its block is absent) and its block's feature (None: none)."""
+    found = []
+    for keys, values in ((CAMERA_KEYS, scene.camera), (RENDER_KEYS, scene.render)):
+        for name, parameter in keys.items():
+            value = getattr(values, name)
+            if parameter.block is None:
+                found.append((parameter, value, None))
+                continue
+            inner = keys_of(parameter.block)
+            block_feature = next((p.feature for p in inner.values() if p.feature is not None), None)
+            found += [(p, None if value is None else getattr(value, p.name), block_feature) for p in inner.values()]
+    return found
+
+
 def features(scene_ir: SceneIR) -> dict[str, bool]:
-    """The template's optional effects, on where the scene uses them."""
-    render, camera, surface, bound = scene_ir.scene.render, scene_ir.scene.camera, scene_ir.surface, scene_ir.bound
+    """The template's optional effects, on where the scene uses them: the
+    features its keys declare (Parameter.feature), then what the scene's
+    shape, materials and passes need."""
+    render, surface, bound = scene_ir.scene.render, scene_ir.surface, scene_ir.bound
+    keys = _kernel_keys(scene_ir.scene)
+    on = {p.feature.name: value is not None and p.feature.on(value) for p, value, _ in keys if p.feature is not None}
+    # glow and step-count AO show the plain march (its closest approach,
+    # its steps), which a feature that alters the march would skip through
+    if on["GLOW"] or (render.ao > 0 and render.ao_method == "steps"):
+        on.update({p.feature.name: False for p, _, _ in keys if p.feature is not None and p.feature.alters_march})
     bounded, half_spaces = bound is not None, bound is not None and bool(bound.half_spaces)
-    transparent = not (ir.is_const(surface.transparency) and surface.transparency.value == 0)
-    glow = render.glow is not None and render.glow.strength > 0
-    step_ao = render.ao > 0 and render.ao_method == "steps"
     return {
-        "GLOW": glow,
-        "FOG": render.fog is not None and render.fog.density > 0,
-        "DITHER": render.dither > 0,
-        "REFLECTIONS": render.reflections > 0,
-        "DEPTH_OF_FIELD": camera.aperture > 0,
-        "TRANSPARENCY": transparent,
-        # glow and step-count AO show the plain march (its closest approach,
-        # its steps), which longer steps would skip through
-        "OVERRELAX": render.overrelax > 1 and not glow and not step_ao,
-        # a packet's cone (CPU lanes only: emit() clears it for one ray per
-        # work-item) skips what glow and step-count AO read, as above
-        "CONE": render.cone_marching == "on" and not glow and not step_ao,
-        # the march keeps its last estimate for the normal that reuses it
-        "FORWARD_NORMALS": render.normals == "forward",
+        **on,
+        "TRANSPARENCY": not (ir.is_const(surface.transparency) and surface.transparency.value == 0),
         # glow needs every miss's closest approach, so misses must be marched
-        "SCENE_BOUND": bounded and not glow,
-        "SCENE_HALF_SPACES": bounded and half_spaces and not glow,
-        "TRANSPARENT_BACKGROUND": render.background == "transparent",
+        "SCENE_BOUND": bounded and not on["GLOW"],
+        "SCENE_HALF_SPACES": bounded and half_spaces and not on["GLOW"],
         # the passes asked for beyond the default channels (run.PASSES)
         **{f"PASS_{name.upper()}": name in render.aovs for name in PASSES},
         "SHADING_PASSES": bool(set(SHADING_PASSES) & set(render.aovs)),
-        "PATH_TRACE": render.integrator == "path",
         "ENVIRONMENT": pathtrace.uses_environment(render),
     }
 
 
-def _effect_constants(render, on: dict[str, bool]) -> list[str]:
+def _key_constants(scene, on: dict[str, bool]) -> list[str]:
+    """The #defines of the keys' values the kernel reads (Parameter.constant),
+    each where its feature is on: numbers as float literals, whole numbers
+    and truths as integers, colours as NAME_R, NAME_G, NAME_B."""
     lines = []
-    if on["GLOW"]:
-        glow = render.glow
-        lines += [*(f"#define GLOW_{c} {literal(v)}" for c, v in zip("RGB", glow.color)),
-                  f"#define GLOW_STRENGTH {literal(glow.strength)}", f"#define GLOW_RADIUS {literal(glow.radius)}"]
-    if on["FOG"]:
-        lines += [*(f"#define FOG_{c} {literal(v)}" for c, v in zip("RGB", render.fog.color)),
-                  f"#define FOG_DENSITY {literal(render.fog.density)}"]
-    if on["DITHER"]:
-        lines.append(f"#define DITHER {literal(render.dither)}")
-    if on["OVERRELAX"]:
-        lines.append(f"#define OVERRELAX {literal(render.overrelax)}")
-    if on["REFLECTIONS"]:
-        lines.append(f"#define REFLECTIONS {render.reflections}")
-    if on["ENVIRONMENT"]:
-        lines += pathtrace.environment_constants(render, literal)
+    for parameter, value, block_feature in _kernel_keys(scene):
+        constant = parameter.constant
+        if constant is None:
+            continue
+        gate = None if constant.always else constant.when or parameter.feature or block_feature
+        if gate is not None and not on[gate.name]:
+            continue
+        if constant.values is not None:
+            values = constant.values(value)
+        else:
+            values = {constant.name: {Type.WHOLE: int, Type.NUMBER: float, Type.VEC3: tuple}[parameter.type](value)}
+        for name, v in values.items():
+            if isinstance(v, tuple):
+                lines += [f"#define {name}_{c} {literal(x)}" for c, x in zip("RGB", v)]
+            else:
+                lines.append(f"#define {name} {int(v) if isinstance(v, (bool, int)) else literal(v)}")
     return lines
 
 
@@ -572,24 +591,19 @@ def _constants(scene_ir: SceneIR, target: Target, on: dict[str, bool]) -> str:
 
     def lane_vector(values):
         return "0.0f" if lanes == 1 else f"((real)({', '.join(literal(v) for v in values)}))"
-    pixel = render.epsilon == "pixel"
-    background = (0.0, 0.0, 0.0) if render.background == "transparent" else render.background
     names = channels(render.aovs)
     return "\n".join([
         _arithmetic_constants(scene_ir, target),
-        f"#define MAX_STEPS {render.max_steps}",
-        f"#define MAX_DISTANCE {literal(render.max_distance)}",
-        f"#define HIT_EPSILON_IS_PIXEL {int(pixel)}",
-        f"#define HIT_EPSILON {literal(0.0 if pixel else render.epsilon)}",
-        f"#define EPSILON_SCALE {literal(render.epsilon_scale)}",
-        *(f"#define BACKGROUND_{c} {literal(v)}" for c, v in zip("RGB", background)),
+        *_key_constants(scene_ir.scene, on),
         f"#define CHANNELS {len(names)}",
         *(f"#define CHANNEL_{_channel_macro(name)} {i}" for i, name in enumerate(names)),
         f"#define LANES_X {width}",
         f"#define LANES_Y {height}",
         f"#define LANE_X {lane_vector([i % width for i in range(lanes)])}",
         f"#define LANE_Y {lane_vector([i // width for i in range(lanes)])}",
-        *_effect_constants(render, on),
+        *(pathtrace.environment_constants(render, literal) if on["ENVIRONMENT"] else []),
+        # the counting build's counters follow the params and the derived slots (stdlib_cl/count.cl)
+        *([f"#define COUNT_BASE {len(scene_ir.scene.params) + DERIVED_SLOTS}"] if target.count else []),
     ])
 
 
@@ -622,9 +636,6 @@ def uniform_source(values: tuple[ir.Expr, ...], double: bool) -> str:
     return double_literals(source) if double else source
 
 
-DISTANCE_SIGNATURE = "ALWAYS_INLINE real distance_estimate(vec3 p, __constant scalar *params)"
-
-
 def emit_distance(scene_ir: SceneIR, target: Target = Target()) -> str:
     """A program of the scene's distance estimate alone, with the kernel
     `distance_at_points`: what sampling the estimate needs (Scene.distance,
@@ -641,7 +652,7 @@ def emit_distance(scene_ir: SceneIR, target: Target = Target()) -> str:
         lib.prelude,
         _library_text(lib.closure(_calls(hoisted.roots[0]))),
         "// ---- the scene " + "-" * 60,
-        function_source(hoisted.roots[0], DISTANCE_SIGNATURE),
+        function_source(hoisted.roots[0], _scene_template("distance_signature")),
         _scalar_copies(lib, (), "", hoisted.derived, len(scene.params)),
         lib.distance_kernel,
     ]
@@ -660,7 +671,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
     scene_ir = dataclasses.replace(
         scene_ir, distance=hoisted.roots[0], surface=type(scene_ir.surface)(*hoisted.roots[1:surface_end]),
         bound=_bound_with(scene_ir.bound, hoisted.roots[surface_end:]) if bound_values else scene_ir.bound)
-    distance = function_source(scene_ir.distance, DISTANCE_SIGNATURE)
+    distance = function_source(scene_ir.distance, _scene_template("distance_signature"))
     on = features(scene_ir)
     on = {**on, "CONE": on["CONE"] and target.lanes > 1, "COUNT": target.count}
     shade, shading_needs = _shade_function(scene_ir, on)
@@ -688,9 +699,11 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
                         scalar=scalar, params=params, slots=DERIVED_SLOTS) + "\n",
         _constants(scene_ir, target, on),
         lib.prelude,
+        lib.counting if target.count else "",
         _library_text(scene_functions),
         "// ---- the scene " + "-" * 60,
-        function_source(scene_ir.distance, DISTANCE_SIGNATURE, counting=True) if target.count else distance,
+        function_source(scene_ir.distance, _scene_template("distance_signature"), counting=True)
+        if target.count else distance,
         _scalar_copies(lib, scene_functions if on["CONE"] else (), distance if on["CONE"] else "",
                        hoisted.derived, len(scene.params)),
         _surface_function(scene_ir), bound,

@@ -1,12 +1,13 @@
 """What scene checking (fractalc/check_expressions.py) and formula
 interpretation (fractalc/formula_interpreter.py) share of an expression:
 its mistakes, a vector's size, its components (`v.xy`) and the broadcasting
-of numbers over vectors, each with its message, on (type, IR items)."""
+of numbers over vectors, each with its message, on (type, IR items); and
+the messages of the mistakes both find, in one wording."""
 from __future__ import annotations
 
 from . import ast
 from .errors import Span
-from .types import TYPE_WORDS, VECTOR_TYPES, Type
+from .types import FLOAT_MAX, TYPE_WORDS, VECTOR_TYPES, Type
 
 COMPONENTS = "xyzw"
 
@@ -44,3 +45,49 @@ def broadcast(operands: list[tuple[Type, tuple]]) -> tuple[int, list[tuple]] | N
         return None
     size = sizes.pop() if sizes else 1
     return size, [items * size if type_ is Type.NUMBER else items for type_, items in operands]
+
+
+# ---- the messages of mistakes scenes and formulas share ------------------------
+
+def different_sizes(name: str, sizes) -> str:
+    """`name` (an operator or a function) given vectors of these different sizes."""
+    shown = sorted(set(sizes))
+    return f"'{name}' on vectors of different sizes ({', '.join(map(str, shown[:-1]))} and {shown[-1]})"
+
+
+def not_numbers(name: str, this: Type) -> str:
+    return f"'{name}' needs numbers or vectors, not {TYPE_WORDS[this]}"
+
+
+def component_not_number(this: Type) -> str:
+    return f"a vector's components must be numbers, this is {TYPE_WORDS[this]}"
+
+
+def undefined(name: str) -> str:
+    """`name`'s constants have no value (log(0), a division by zero in a function)."""
+    return f"'{name}' is undefined for these values"
+
+
+def beyond_floats(name: str, value: float) -> str:
+    """A constant `name` computes past what the kernel's floats hold (it would compute infinity)."""
+    return f"'{name}' gives {value:.3g}, beyond the kernel's floats ({FLOAT_MAX:.3g})"
+
+
+def uncalled_function(name: str) -> str:
+    return f"'{name}' is a function: call it, e.g. '{name}(...)'"
+
+
+def named_argument(name: str) -> str:
+    """A named argument to a function that takes its arguments by position."""
+    return f"'{name}' takes its arguments in order, without names"
+
+
+def argument_count(name: str, low: int, high: int, about: str, given: int) -> str:
+    """`name` takes `low` to `high` arguments (`about` shows them), not `given`."""
+    count = f"{low}" if low == high else f"{low} to {high}"
+    return f"'{name}' takes {count} argument{'s' if high != 1 else ''} ({about}), not {given}"
+
+
+def wrong_argument(name: str, wanted: str, about: str, this: Type) -> str:
+    """An argument of `name` that is `this`, where `wanted` (words: "a vector") goes."""
+    return f"'{name}' needs {wanted} here ({about}), this is {TYPE_WORDS[this]}"

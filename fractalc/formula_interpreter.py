@@ -9,12 +9,14 @@ from typing import Callable
 
 from . import ast, formulas, ir
 from .errors import Span
-from .expressions import Mistake, broadcast, components, require_vector_size
+from .expressions import (Mistake, argument_count, beyond_floats, broadcast, component_not_number, components,
+                          different_sizes, named_argument, not_numbers, require_vector_size, uncalled_function,
+                          undefined, wrong_argument)
 from .formula_statements import DERIVED, ESTIMATES
 from .formula_values import (INDEPENDENT, MASK, NUMBER, ONE, Value, dependent_scalar,
                              number, scaled_form, summed_form, word)
 from .stdlib import MATH
-from .types import FLOAT_MAX, VECTOR_TYPES, Type, in_float_range, vector_type
+from .types import VECTOR_TYPES, Type, in_float_range, vector_type
 
 
 class Interpreter:
@@ -72,7 +74,7 @@ class Interpreter:
                 raise Mistake(e.span, f"'{e.name}' is set on only one side of the 'if' at line "
                                       f"{one_sided[e.name].line}: set it on both, or before the 'if'")
             if e.name in FUNCTIONS or e.name in ESTIMATES:
-                raise Mistake(e.span, f"'{e.name}' is a function: call it, e.g. '{e.name}(...)'")
+                raise Mistake(e.span, uncalled_function(e.name))
             if e.name in DERIVED:
                 raise Mistake(e.span, f"'{e.name}' is the compiler's derivative at the orbit's end: only 'final' "
                                       f"lines read it")
@@ -81,7 +83,7 @@ class Interpreter:
             parts = [self.expr(x, env) for x in e.items]
             for x, v in zip(e.items, parts):
                 if v.type == MASK:
-                    raise Mistake(x.span, "a vector's components must be numbers, this is a comparison")
+                    raise Mistake(x.span, component_not_number(v.type))
             require_vector_size(e, sum(len(v.items) for v in parts))
             return joined(parts)
         if isinstance(e, ast.Unary):
@@ -94,7 +96,7 @@ class Interpreter:
             try:
                 return within_float(e, self.binary(e, left, right))
             except (ValueError, ZeroDivisionError, OverflowError):
-                raise Mistake(e.span, f"'{e.op}' is undefined for these values") from None
+                raise Mistake(e.span, undefined(e.op)) from None
         if isinstance(e, ast.Chain):
             return self.chain(e, [self.expr(x, env) for x in e.operands])
         if isinstance(e, ast.Field):
@@ -103,7 +105,7 @@ class Interpreter:
             args = e.args
             for a in args:
                 if a.name is not None:
-                    raise Mistake(a.span, f"'{e.name}' takes its arguments in order, without names")
+                    raise Mistake(a.span, named_argument(e.name))
             values = [self.expr(a.value, env) for a in args]
             if e.name in ESTIMATES:
                 if self.estimates is None:
@@ -138,7 +140,7 @@ class Interpreter:
     def binary(self, e: ast.Binary, a: Value, b: Value) -> Value:
         op = e.op
         if MASK in (a.type, b.type):
-            raise Mistake(e.span, f"'{op}' needs numbers or vectors, not a comparison")
+            raise Mistake(e.span, not_numbers(op, MASK))
         if op in ("<", "<=", ">", ">=", "==", "!="):
             if a.type != NUMBER or b.type != NUMBER:
                 raise Mistake(e.span, f"'{op}' compares numbers, not {word(a) if a.type != NUMBER else word(b)}"
@@ -152,7 +154,7 @@ class Interpreter:
             return Value(MASK, (mask,), INDEPENDENT if a.independent and b.independent else None)
         combined = broadcast([(a.type, a.items), (b.type, b.items)])
         if combined is None:
-            raise Mistake(e.span, f"'{op}' on vectors of different sizes ({len(a.items)} and {len(b.items)})")
+            raise Mistake(e.span, different_sizes(op, (len(a.items), len(b.items))))
         size, (left, right) = combined
         items = tuple(ir.op(op, x, y) for x, y in zip(left, right))
         underivable = a.underivable or b.underivable
@@ -228,10 +230,7 @@ class Function:
     def apply(self, e: ast.Call, values: list[Value]) -> Value:
         required = [a for a in self.arguments if not a.endswith("?")]
         if not len(required) <= len(values) <= len(self.arguments):
-            count = f"{len(required)}" if len(required) == len(self.arguments) else \
-                f"{len(required)} to {len(self.arguments)}"
-            raise Mistake(e.span, f"'{e.name}' takes {count} argument{'s' if len(self.arguments) != 1 else ''} "
-                                  f"({self.about}), not {len(values)}")
+            raise Mistake(e.span, argument_count(e.name, len(required), len(self.arguments), self.about, len(values)))
         size = None
         for arg, want, v in zip(e.args, self.arguments, values):
             want = want.rstrip("?")
@@ -239,16 +238,16 @@ class Function:
                   "v": v.type in VECTOR_TYPES, "any": v.type != MASK}[want]
             if want == "v" and ok:
                 if size is not None and len(v.items) != size:
-                    raise Mistake(arg.span, f"'{e.name}' needs vectors of one size ({size} and {len(v.items)})")
+                    raise Mistake(arg.span, different_sizes(e.name, (size, len(v.items))))
                 size = len(v.items)
             if not ok:
                 words = {"n": "a number", "3": "a 3-vector", "4": "a 4-vector", "m": "a comparison",
                          "v": "a vector", "any": "a number or a vector"}
-                raise Mistake(arg.span, f"'{e.name}' needs {words[want]} here ({self.about}), this is {word(v)}")
+                raise Mistake(arg.span, wrong_argument(e.name, words[want], self.about, v.type))
         try:
             return self.compute(e.span, *values)
         except (ValueError, ZeroDivisionError, OverflowError):
-            raise Mistake(e.span, f"'{e.name}' is undefined for these values") from None
+            raise Mistake(e.span, undefined(e.name)) from None
 
 
 def _block(make: Callable):
@@ -278,7 +277,7 @@ def _map(name: str, derivable: bool = True):
     def compute(span: Span, *values: Value):
         combined = broadcast([(v.type, v.items) for v in values])
         if combined is None:
-            raise Mistake(span, f"'{name}' on vectors of different sizes")
+            raise Mistake(span, different_sizes(name, [len(v.items) for v in values if v.type in VECTOR_TYPES]))
         size, lanes = combined
         items = tuple(ir.op(name, *args) for args in zip(*lanes))
         independent = all(v.independent for v in values)
@@ -364,11 +363,11 @@ FUNCTIONS: dict[str, Function] = {
 }
 
 
-def within_float(e: ast.Expr, value: Value) -> Value:
+def within_float(e: ast.Binary | ast.Call, value: Value) -> Value:
     """`value`, where what it computes from constants alone is a number the
     kernel's floats hold, as in a scene's expressions (check.py); a float
     kernel would compute infinity."""
     for item in value.items:
         if ir.is_const(item) and not in_float_range(item.value):
-            raise Mistake(e.span, f"this gives {item.value:.3g}, beyond the kernel's floats ({FLOAT_MAX:.3g})")
+            raise Mistake(e.span, beyond_floats(e.op if isinstance(e, ast.Binary) else e.name, item.value))
     return value

@@ -420,11 +420,18 @@ def branch(condition: Expr, then, otherwise) -> tuple[Expr, ...]:
     return tuple(Out(made, i, e.type) for i, e in enumerate(then))
 
 
-def bounded(bound: Expr, inner: Expr, margin: Expr) -> Expr:
-    """`inner` where `bound < margin`, else `bound`: a conservative bounding
+# Evaluate a bounded shape within one bound radius of its bounding sphere.
+# Beyond, the sphere's distance (>= the radius) stands in; a ray takes that
+# for a hit only where the threshold exceeds the radius: a fractal under a pixel.
+BOUND_MARGIN = 1.0
+
+
+def bounded(bound: Expr, inner: Expr, radius: Expr) -> Expr:
+    """`inner` within BOUND_MARGIN radii of a bounding sphere of `radius`,
+    `bound` (the sphere's distance) beyond: a conservative bounding
     distance that spares evaluating `inner` (a fractal) far from it. Both
     are lower bounds of the true distance, so either is a safe step."""
-    return branch(op("lt", bound, margin), (inner,), (bound,))[0]
+    return branch(op("lt", bound, mul(radius, const(BOUND_MARGIN))), (inner,), (bound,))[0]
 
 
 # ---- walking ---------------------------------------------------------------

@@ -1,16 +1,18 @@
-"""The scene's lights in the kernel, for both integrators: each light
-kind's entry says how the direct renderer's `shade` writes it (which
-templates of stdlib_cl/shade.cl, with which values: fractalc/emit.py
-fills them in) and its code in the path tracer's LIGHTS table, whose rows
-`lights_table` writes in the layout LIGHT_FIELDS (read by name in
-stdlib_cl/pathtrace.cl)."""
+"""The light kinds, for both integrators and the checker: each kind's
+entry of LIGHT_KINDS gives its word (program.LightKind is made from
+them), its block's keys, whether it is an area light, how the direct
+renderer's `shade` writes it (which templates of stdlib_cl/shade.cl, with
+which values: fractalc/emit.py fills them in) and its code in the path
+tracer's LIGHTS table, whose rows `lights_table` writes in the layout
+LIGHT_FIELDS (read by name in stdlib_cl/pathtrace.cl). The functions here
+take a program.Light and a program.CheckedScene (program imports this
+module, so it is not imported here)."""
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Callable
-
-from .program import CheckedScene, Light
 
 # A light's radiance, and a point light's inverse-square factor, are capped so
 # that sums of lights, their reflections and fog stay finite in float (no
@@ -28,48 +30,66 @@ def _unit(v) -> tuple[float, ...]:
     return tuple(c / length for c in v)
 
 
-def _from_direction(light: Light) -> Filled:
+def _from_direction(light) -> Filled:
     # the file gives the direction the light travels
     return "light_from_direction", {"to_light": tuple(-c for c in _unit(light.vector))}
 
 
-def _from_position(light: Light) -> Filled:
+def _from_position(light) -> Filled:
     return "light_from_position", {"position": tuple(light.vector), "max_inverse_square": MAX_INVERSE_SQUARE}
 
 
-def _cone(light: Light) -> tuple[float, float]:
+def _cone(light) -> tuple[float, float]:
     """A spot's cone cosines, outer and inner (kept apart: smoothstep's edges)."""
     inner, outer = light.cone_cosines()
     return outer, max(inner, outer + 1e-6)
 
 
-def _spot_cone(light: Light) -> Filled:
+def _spot_cone(light) -> Filled:
     outer, inner = _cone(light)
     return "spot_cone", {"outer": outer, "inner": inner, "axis": _unit(light.direction)}
 
 
-def _rectangle_facing(light: Light) -> Filled:
+def _rectangle_facing(light) -> Filled:
     return "rectangle_facing", {"facing": _unit(light.direction)}
 
 
+# The keys every light block takes, after its kind's own
+COMMON_KEYS = ("color", "intensity", "shadows", "softness")
+
+
 @dataclass(frozen=True)
-class LightKind:
+class LightKindEntry:
+    word: str                           # the kind's word in a file (`light WORD { ... }`)
+    # its block's keys, in the order messages list them: Light's fields, a
+    # `position` (Light.vector), and for an aimed light a `target` instead of its direction
+    keys: tuple[str, ...]
     code: int                           # the kind's code in the path tracer's LIGHTS table (LIGHT_IS_KIND)
-    # the direct renderer: where the light comes from (toward it, how far,
-    # how bright), and what then shapes its radiance
-    origin: Callable[[Light], Filled]
-    shaping: tuple[Callable[[Light], Filled], ...]
+    # Light.vector is the way its light travels (a `direction` key), not its position
+    directional: bool
+    # the path tracer samples its area; the direct renderer shines it from
+    # its centre, with soft shadows (unless the file says) as a stand-in
+    area: bool
+    # the direct renderer: what shapes its radiance after its origin
+    shaping: tuple[Callable[[object], Filled], ...]
+
+    def origin(self, light) -> Filled:
+        """The direct renderer's template of where `light` comes from
+        (toward it, how far, how bright), with its values."""
+        return _from_direction(light) if self.directional else _from_position(light)
 
 
-# Sphere and rectangle lights shine from their centres in the direct
-# renderer; the path tracer samples their areas (stdlib_cl/pathtrace.cl).
-LIGHT_KINDS = {
-    "directional": LightKind(0, _from_direction, ()),
-    "point": LightKind(1, _from_position, ()),
-    "spot": LightKind(3, _from_position, (_spot_cone,)),
-    "sphere": LightKind(4, _from_position, ()),
-    "rectangle": LightKind(5, _from_position, (_rectangle_facing,)),
-}
+LIGHT_KINDS = {entry.word: entry for entry in (
+    LightKindEntry("directional", ("direction", *COMMON_KEYS), code=0, directional=True, area=False, shaping=()),
+    LightKindEntry("point", ("position", *COMMON_KEYS), code=1, directional=False, area=False, shaping=()),
+    LightKindEntry("spot", ("position", "direction", "target", *COMMON_KEYS, "angle", "falloff"), code=3,
+                   directional=False, area=False, shaping=(_spot_cone,)),
+    LightKindEntry("sphere", ("position", "radius", *COMMON_KEYS), code=4, directional=False, area=True, shaping=()),
+    LightKindEntry("rectangle", ("position", "direction", "target", "width", "height", *COMMON_KEYS), code=5,
+                   directional=False, area=True, shaping=(_rectangle_facing,)),
+)}
+# The kinds as words of the language (LightKind.SPOT == "spot")
+LightKind = StrEnum("LightKind", [(word.upper(), word) for word in LIGHT_KINDS])
 HEADLIGHT = 2          # no lights in the scene: a light at the eye
 
 # A row of the kernel's LIGHTS table: each field and its width, in order;
@@ -106,19 +126,20 @@ def _light_row(kind: int, vector, color, intensity: float, shadows: bool,
     return [float(v) for name, _ in LIGHT_FIELDS for v in fields[name]]
 
 
-def lights_table(scene: CheckedScene) -> list[list[float]]:
+def lights_table(scene) -> list[list[float]]:
     rows = []
     for light in scene.lights:
+        kind = LIGHT_KINDS[light.kind]
         vector = light.vector
-        if light.kind == "directional":   # the file gives the direction light travels
+        if kind.directional:   # the file gives the direction light travels
             length = math.sqrt(sum(c * c for c in vector))
             vector = tuple(-c / length for c in vector)
         length = math.sqrt(sum(c * c for c in light.direction))
         # a spot's cone cosines, or a sphere light's radius
         cone = (light.radius, 0.0) if light.kind == "sphere" else _cone(light)
         edges = sum(light.rectangle_edges(), ()) if light.kind == "rectangle" else (0.0,) * 6
-        rows.append(_light_row(LIGHT_KINDS[light.kind].code, vector, light.color, light.intensity,
-                               light.shadows != "none", tuple(c / length for c in light.direction), cone, edges))
+        rows.append(_light_row(kind.code, vector, light.color, light.intensity, light.shadows != "none",
+                               tuple(c / length for c in light.direction), cone, edges))
     if not rows and scene.render.environment is None and scene.render.environment_map is None:
         # nothing lights the scene: a headlight
         rows.append(_light_row(HEADLIGHT, (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 1.0, True))

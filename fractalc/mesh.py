@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arguments import MAX_RESOLUTION, checked
-from .lower import MAX_COORDINATE
+from .transforms import MAX_COORDINATE
 from .memory import require_memory
 from .write import replacing
 
@@ -301,7 +301,7 @@ def check_bounds(bounds, resolution: int, double: bool, name: str = "bounds") ->
     """`bounds` (xmin, ymin, zmin, xmax, ymax, zmax) as (lower, upper);
     ValueError, of `name`, where its cells would be degenerate: a side shorter than
     one cell (longest side / `resolution`), a coordinate beyond
-    lower.MAX_COORDINATE (where the kernel clamps points), or cells too
+    transforms.MAX_COORDINATE (where the kernel clamps points), or cells too
     small for the kernel's numbers to tell their corners apart there
     (CELL_PRECISION: float's or double's)."""
     try:

@@ -12,9 +12,10 @@ from functools import lru_cache
 
 import numpy as np
 
-from .lights import LIGHT_STRIDE, MAX_INVERSE_SQUARE, MAX_IRRADIANCE, light_layout, lights_table
+from .lights import LIGHT_KINDS, LIGHT_STRIDE, MAX_INVERSE_SQUARE, MAX_IRRADIANCE, light_layout, lights_table
 from .program import CheckedScene
 from .resources import resource_dir
+from .stdlib import templates
 
 def uses_environment(render) -> bool:
     """Whether the kernel has the template's `environment` (the sky): an
@@ -223,22 +224,26 @@ def environment_light(render) -> np.ndarray:
     return (_COSINE_LOBE / np.pi * _HARMONIC_FACTORS)[:, None] * projections
 
 
+def _table(template: str, **values: str) -> str:
+    """A table's template of stdlib_cl/scene.cl filled in."""
+    return templates("scene.cl")[template].substitute(values)
+
+
 def environment_constants(render, literal) -> list[str]:
     """The sky's radiance: the environment block's, else the background
     colour everywhere (none with a transparent background); with a map,
     its texels and sampling tables, times the block's intensity."""
     environment = render.environment
     light = []
+
+    def table(name, values):
+        return _table("float_table", name=name, values=", ".join(literal(float(v)) for v in np.ravel(values)))
     if lights_surfaces(render):   # the direct renderer's environment light (environment_light)
-        light = [f"__constant float ENVIRONMENT_LIGHT[] = "
-                 f"{{{', '.join(literal(float(v)) for v in np.ravel(environment_light(render)))}}};"]
+        light = [table("ENVIRONMENT_LIGHT", environment_light(render))]
     if render.environment_map is not None:
         texels = environment_map(render.environment_map)
         rows, columns, density = _map_tables(texels)
         scale = environment.intensity if environment is not None else 1.0
-
-        def table(name, values):
-            return f"__constant float {name}[] = {{{', '.join(literal(float(v)) for v in np.ravel(values))}}};"
         return [*light, "#define ENVIRONMENT_MAP 1", f"#define MAP_WIDTH {MAP_WIDTH}", f"#define MAP_HEIGHT {MAP_HEIGHT}",
                 table("ENVIRONMENT_TEXELS", np.minimum(texels * scale, MAX_IRRADIANCE)),
                 table("ENVIRONMENT_ROWS", rows), table("ENVIRONMENT_COLUMNS", columns),
@@ -259,16 +264,15 @@ def source(scene: CheckedScene, literal, transparency: bool) -> str:
     whether some material is transparent (the template's FEATURE_TRANSPARENCY)."""
     render = scene.render
     rows = lights_table(scene)
-    constants = [f"#define BOUNCES {render.bounces}", *light_layout(),
+    constants = [*light_layout(),
                  f"#define MAX_INVERSE_SQUARE {literal(MAX_INVERSE_SQUARE)}",
                  f"#define CAMERA_SEES_ENVIRONMENT {int(render.background != 'transparent')}",
                  f"#define PATH_TRANSPARENCY {int(transparency)}",
-                 f"#define AREA_LIGHTS {int(any(light.kind in ('sphere', 'rectangle') for light in scene.lights))}",
+                 f"#define AREA_LIGHTS {int(any(LIGHT_KINDS[light.kind].area for light in scene.lights))}",
                  f"#define MIS {int(MIS)}",
                  f"#define LIGHT_COUNT {len(rows)}",
-                 "__constant scalar LIGHTS[] = {",      # never empty (C has no empty arrays)
-                 *(f"    {', '.join(literal(v) for v in row)}," for row in rows or [[0.0] * LIGHT_STRIDE]),
-                 "};"]
+                 _table("lights_table", rows="".join(_table("lights_row", values=", ".join(literal(v) for v in row))
+                                                     + "\n" for row in rows or [[0.0] * LIGHT_STRIDE]))]
     text = (resource_dir("stdlib_cl") / "pathtrace.cl").read_text()
     return "\n".join(constants) + "\n\n" + text
 

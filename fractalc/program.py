@@ -11,9 +11,10 @@ from typing import Union
 
 from . import ir
 from .errors import Diagnostic, Span
+from .lights import LIGHT_KINDS, LightKind
 from .stdlib import Signature
-from .types import (NONZERO, Parameter, Type, above, at_least, at_most, below, between, key, keys_of,
-                    range_violation)
+from .types import (NONZERO, Constant, Feature, Parameter, Type, above, at_least, at_most, below, between, key,
+                    keys_of, range_violation)
 from .write import DEFAULT_TONE_CURVE, TONE_CURVES
 
 Vector3 = tuple[float, float, float]
@@ -65,7 +66,7 @@ class Combination:
 
 @dataclass(frozen=True)
 class Transformed:
-    kind: str                   # a key of stdlib.TRANSFORMS other than material/color
+    kind: str                   # a key of transforms.TRANSFORMS
     shape: "Shape"
     args: tuple[ir.Arg, ...]
     span: Span
@@ -195,7 +196,7 @@ class Camera:
     target: Vector3 = key((0.0, 0.0, 0.0), Type.VEC3)
     up: Vector3 = key((0.0, 0.0, 1.0), Type.VEC3, NONZERO)
     fov: float = key(45.0, Type.NUMBER, above(0), below(180))
-    aperture: float = key(0.0, Type.NUMBER, at_least(0))
+    aperture: float = key(0.0, Type.NUMBER, at_least(0), feature=Feature("DEPTH_OF_FIELD", lambda a: a > 0))
     focus: float | None = key(None, Type.NUMBER, above(0))
     projection: Projection = key(Projection.PINHOLE, Type.WORD, words=Projection)
     # a fisheye's angle across the image height, degrees
@@ -239,14 +240,6 @@ def _cross(a, b):
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-class LightKind(StrEnum):
-    DIRECTIONAL = "directional"
-    POINT = "point"
-    SPOT = "spot"
-    SPHERE = "sphere"
-    RECTANGLE = "rectangle"
-
-
 class Shadows(StrEnum):
     NONE = "none"
     HARD = "hard"
@@ -256,7 +249,7 @@ class Shadows(StrEnum):
 def light_vector_key(kind: str) -> str:
     """The key of a light block that `Light.vector` holds: the way a
     directional light travels, any other light's position."""
-    return "direction" if kind == LightKind.DIRECTIONAL else "position"
+    return "direction" if LIGHT_KINDS[kind].directional else "position"
 
 
 @dataclass(frozen=True)
@@ -300,35 +293,29 @@ class Light:
         return math.cos(inner), math.cos(min(inner + math.radians(self.falloff), math.pi))
 
 
-# A light block's keys by kind, in the order messages list them: the
-# Light's fields, a position (Light.vector) and, for an aimed light, a
-# target instead of its direction.
+# A light block's keys by kind (lights.LIGHT_KINDS: in the order messages
+# list them): the Light's fields, a position (Light.vector) and, for an
+# aimed light, a target instead of its direction.
 _LIGHT_PLACE = (Parameter("position", Type.VEC3), Parameter("target", Type.VEC3))
-_LIGHT_COMMON = ("color", "intensity", "shadows", "softness")
-_LIGHT_KEY_NAMES = {
-    LightKind.DIRECTIONAL: ("direction", *_LIGHT_COMMON),
-    LightKind.POINT: ("position", *_LIGHT_COMMON),
-    LightKind.SPOT: ("position", "direction", "target", *_LIGHT_COMMON, "angle", "falloff"),
-    LightKind.SPHERE: ("position", "radius", *_LIGHT_COMMON),
-    LightKind.RECTANGLE: ("position", "direction", "target", "width", "height", *_LIGHT_COMMON),
-}
 _ALL_LIGHT_KEYS = keys_of(Light, *_LIGHT_PLACE)
-LIGHT_KEYS = {kind: {name: _ALL_LIGHT_KEYS[name] for name in names} for kind, names in _LIGHT_KEY_NAMES.items()}
+LIGHT_KEYS = {LightKind(word): {name: _ALL_LIGHT_KEYS[name] for name in kind.keys}
+              for word, kind in LIGHT_KINDS.items()}
 
 
 @dataclass(frozen=True)
 class Glow:
     """Light around the surface for rays that miss: strength * exp(-closest / radius)."""
-    color: Vector3 = key((1.0, 0.8, 0.5), Type.VEC3, at_least(0))
-    strength: float = key(1.0, Type.NUMBER, at_least(0))
-    radius: float = key(0.1, Type.NUMBER, above(0))
+    color: Vector3 = key((1.0, 0.8, 0.5), Type.VEC3, at_least(0), constant="GLOW")
+    strength: float = key(1.0, Type.NUMBER, at_least(0), feature=Feature("GLOW", lambda s: s > 0),
+                          constant="GLOW_STRENGTH")
+    radius: float = key(0.1, Type.NUMBER, above(0), constant="GLOW_RADIUS")
 
 
 @dataclass(frozen=True)
 class Fog:
     """Exponential distance fog: colour mixes toward `color` by 1 - exp(-density t)."""
-    color: Vector3 = key((0.5, 0.6, 0.7), Type.VEC3, at_least(0))
-    density: float = key(0.1, Type.NUMBER, at_least(0))
+    color: Vector3 = key((0.5, 0.6, 0.7), Type.VEC3, at_least(0), constant="FOG")
+    density: float = key(0.1, Type.NUMBER, at_least(0), feature=Feature("FOG", lambda d: d > 0), constant="FOG_DENSITY")
 
 
 @dataclass(frozen=True)
@@ -389,6 +376,9 @@ class Integrator(StrEnum):
 # step, which beyond it can pass float's range on the scene (NaN normals).
 MAX_EPSILON_SCALE = 1000
 
+# The path tracer's part of the kernel: `integrator`'s feature, which `bounces` is written under too
+PATH_TRACE = Feature("PATH_TRACE", lambda integrator: integrator == Integrator.PATH)
+
 
 @dataclass(frozen=True)
 class RenderSettings:
@@ -396,34 +386,45 @@ class RenderSettings:
     a rebuild; exposure and tonemap only PNG writing reads)."""
     width: int = key(640, Type.WHOLE, at_least(1), at_most(65536), runtime=True)
     height: int = key(480, Type.WHOLE, at_least(1), at_most(65536), runtime=True)
-    max_steps: int = key(256, Type.WHOLE, between(1, 100000))
-    max_distance: float = key(50.0, Type.NUMBER, above(0))
-    epsilon: float | str = key("pixel", Type.NUMBER, above(0), words=("pixel",))   # a number, or "pixel"
+    max_steps: int = key(256, Type.WHOLE, between(1, 100000), constant="MAX_STEPS")
+    max_distance: float = key(50.0, Type.NUMBER, above(0), constant="MAX_DISTANCE")
+    # a number, or "pixel": the threshold grows with the distance, a pixel's footprint (stdlib_cl/engine/hits.cl)
+    epsilon: float | str = key("pixel", Type.NUMBER, above(0), words=("pixel",), constant=Constant(values=lambda e: {
+        "HIT_EPSILON_IS_PIXEL": e == "pixel", "HIT_EPSILON": 0.0 if e == "pixel" else float(e)}))
     ao: float = key(0.0, Type.NUMBER, between(0, 1))
     samples: int = key(1, Type.WHOLE, at_least(1), at_most(4096), runtime=True)
-    background: Vector3 | str = key((0.05, 0.05, 0.08), Type.VEC3, at_least(0), words=("transparent",))
+    background: Vector3 | str = key((0.05, 0.05, 0.08), Type.VEC3, at_least(0), words=("transparent",),
+                                    feature=Feature("TRANSPARENT_BACKGROUND", lambda b: b == "transparent"),
+                                    constant=Constant(values=lambda b: {
+                                        "BACKGROUND": (0.0, 0.0, 0.0) if b == "transparent" else b}, always=True))
     precision: Precision = key(Precision.FLOAT, Type.WORD, words=Precision)
-    reflections: int = key(0, Type.WHOLE, between(0, 16))
+    reflections: int = key(0, Type.WHOLE, between(0, 16), feature=Feature("REFLECTIONS", lambda r: r > 0),
+                           constant="REFLECTIONS")
     glow: Glow | None = key(None, Type.BLOCK, block=Glow)
     fog: Fog | None = key(None, Type.BLOCK, block=Fog)
     slice: Slice | None = key(None, Type.BLOCK, block=Slice)
     ao_method: AoMethod = key(AoMethod.NORMAL, Type.WORD, words=AoMethod)
     # random fraction of the first step, against banding
-    dither: float = key(1.0, Type.NUMBER, between(0, 1))
+    dither: float = key(1.0, Type.NUMBER, between(0, 1), feature=Feature("DITHER", lambda d: d > 0), constant="DITHER")
     # over-relaxation factor of sphere tracing (1 = plain)
-    overrelax: float = key(1.3, Type.NUMBER, between(1, 1.99))
-    # march a work-item's packet of camera rays as one cone first (CPU lanes)
-    cone_marching: Switch = key(Switch.ON, Type.WORD, words=Switch)
+    overrelax: float = key(1.3, Type.NUMBER, between(1, 1.99),
+                           feature=Feature("OVERRELAX", lambda o: o > 1, alters_march=True), constant="OVERRELAX")
+    # march a work-item's packet of camera rays as one cone first (CPU lanes: emit clears it for one ray a work-item)
+    cone_marching: Switch = key(Switch.ON, Type.WORD, words=Switch,
+                                feature=Feature("CONE", lambda c: c == Switch.ON, alters_march=True))
     # multiplies the hit threshold (a quality knob)
-    epsilon_scale: float = key(1.0, Type.NUMBER, above(0), at_most(MAX_EPSILON_SCALE))
-    normals: Normals = key(Normals.TETRAHEDRAL, Type.WORD, words=Normals)
+    epsilon_scale: float = key(1.0, Type.NUMBER, above(0), at_most(MAX_EPSILON_SCALE), constant="EPSILON_SCALE")
+    # the march keeps its last estimate for the forward differences that reuse it
+    normals: Normals = key(Normals.TETRAHEDRAL, Type.WORD, words=Normals,
+                           feature=Feature("FORWARD_NORMALS", lambda n: n == Normals.FORWARD))
     fast_math: FastMath = key(FastMath.AUTO, Type.WORD, words=FastMath)
     # stops: PNG colour times 2^exposure (EXR stays as rendered)
     exposure: float = key(0.0, Type.NUMBER, between(-20, 20), runtime=True)
     # PNG tone curve: soft (a shoulder above 0.8) | none (clip) | reinhard | aces
     tonemap: str = key(DEFAULT_TONE_CURVE, Type.WORD, words=TONE_CURVES, runtime=True)
-    integrator: Integrator = key(Integrator.DIRECT, Type.WORD, words=Integrator)
-    bounces: int = key(4, Type.WHOLE, between(1, 64))       # path: the most surface scatterings of a path
+    integrator: Integrator = key(Integrator.DIRECT, Type.WORD, words=Integrator, feature=PATH_TRACE)
+    # path: the most surface scatterings of a path
+    bounces: int = key(4, Type.WHOLE, between(1, 64), constant=Constant("BOUNCES", when=PATH_TRACE))
     # path: the sky; None: the background everywhere
     environment: Environment | None = key(None, Type.BLOCK, block=Environment)
     environment_map: str | None = None       # an equirectangular image, the sky instead; not a file key

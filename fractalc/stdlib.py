@@ -14,7 +14,8 @@ ARG is `name: type [= default] [constraint ...]`, with types `num`, `int`,
 `vec3`, `vec4` and `size` (a number or a vec3; a number means all three),
 and constraints `>X`, `>=X`, `<=X`, `<X`, `A..B` (inclusive), `nonzero`, or
 `<=other_arg`. The language-level forms that are not library functions
-(combinators, transforms, math) are tabled below.
+(combinators, colourings, math) are tabled below; transforms are
+fractalc/transforms.py's.
 
 Besides the library: the prelude, the engine (`engine/`, the fixed part of
 every render kernel, ENGINE), the kernel of distances at points, and the
@@ -30,10 +31,11 @@ from functools import lru_cache
 from string import Template
 
 from .resources import resource_dir
-from .types import NONZERO, Parameter, Type, above, at_least, between, parse_constraint
+from .types import Parameter, Type, above, at_least, between, parse_constraint
 
 PRELUDE = "prelude.cl"
 DISTANCE_KERNEL = "distance.cl"
+COUNTING = "count.cl"
 # The engine: the fixed part of every render kernel, one file per concern
 # in stdlib_cl/engine/, in the order the kernel holds them (each after what
 # it uses); its `#if FEATURE_` blocks hold the optional effects.
@@ -124,7 +126,8 @@ def _parameter_types(source: str) -> tuple[str, ...]:
     """C types of a definition's parameters (`real`, `int`, `vec3`, ...)."""
     code = "\n".join(line for line in source.splitlines() if not line.startswith("//"))
     inside = code[code.index("(") + 1:code.index(")")]
-    return tuple(" ".join(p.split()[:-1]).replace("__constant ", "") for p in inside.split(",") if p.strip())
+    return tuple(" ".join(p.split()[:-1]).replace("__constant ", "").replace("PARAMS_SPACE ", "")
+                 for p in inside.split(",") if p.strip())
 
 
 def _signatures(lines: list[str], function: str) -> dict[str, Signature]:
@@ -191,6 +194,7 @@ class Library:
     prelude: str
     engine: str             # the files of ENGINE, in order
     distance_kernel: str    # `distance_at_points`, for render programs and distance programs alike
+    counting: str           # the counting build's hooks (fractalc/count.py), after the prelude in that build alone
 
     def closure(self, roots) -> list[Function]:
         """The functions `roots` need, each after the ones it calls."""
@@ -233,7 +237,8 @@ def library() -> Library:
     signatures = {name: replace(sig, bound_radius=name + BOUND_RADIUS) if name + BOUND_RADIUS in functions else sig
                   for name, sig in signatures.items()}
     engine = "\n\n".join((root / ENGINE_DIR / f"{name}.cl").read_text().rstrip("\n") for name in ENGINE)
-    return Library(with_calls, signatures, (root / PRELUDE).read_text(), engine, (root / DISTANCE_KERNEL).read_text())
+    return Library(with_calls, signatures, (root / PRELUDE).read_text(), engine, (root / DISTANCE_KERNEL).read_text(),
+                   (root / COUNTING).read_text())
 
 
 _TEMPLATE_START = "//@ "
@@ -266,20 +271,6 @@ def _p(name, type_, default=None, *constraints, words=()):
 
 _SMOOTH = (_p("smooth", Type.NUMBER, 0.0, at_least(0)),)
 COMBINATORS = {name: Signature("combinator", name, _SMOOTH) for name in ("union", "intersect", "subtract")}
-
-TRANSFORMS = {
-    "translate": Signature("transform", "translate", (_p("offset", Type.VEC3),)),
-    "rotate": Signature("transform", "rotate", (_p("axis", Type.VEC3, None, NONZERO), _p("degrees", Type.NUMBER))),
-    "scale": Signature("transform", "scale", (_p("factor", Type.NUMBER, None, above(0)),)),
-    "repeat": Signature("transform", "repeat", (_p("period", Type.SIZE, None, at_least(0)),)),
-    "round": Signature("transform", "round", (_p("radius", Type.NUMBER, None, at_least(0)),)),
-    "onion": Signature("transform", "onion", (_p("thickness", Type.NUMBER, None, above(0)),)),
-    "twist": Signature("transform", "twist", (_p("rate", Type.NUMBER),)),
-    "bend": Signature("transform", "bend", (_p("rate", Type.NUMBER),)),
-    "material": Signature("transform", "material", (_p("material", Type.MATERIAL),)),
-    "color": Signature("transform", "color", (_p("rgb", Type.COLOR, None, between(0, 1000)),)),
-}
-
 
 # `.color(orbit_trap(...))`: a fractal coloured by how near its orbit comes
 # to the origin or the coordinate planes (Syntopia part II), from `near`

@@ -9,6 +9,7 @@ import math
 from dataclasses import MISSING, dataclass, field, fields
 from enum import Enum, StrEnum
 from functools import lru_cache
+from typing import Callable
 
 # The largest float: a number beyond it is infinite in a float kernel
 FLOAT_MAX = 3.4028234663852886e38
@@ -151,6 +152,34 @@ def parse_constraint(text: str) -> Constraint:
     return Bound(comparison, limit if limit[:1].isalpha() else float(limit))
 
 
+# ---- what the kernel reads of a key ----------------------------------------------
+
+@dataclass(frozen=True)
+class Feature:
+    """The kernel's `#if FEATURE_<name>` blocks (stdlib_cl/engine/) that a
+    key turns on where `on(value)` holds (emit.features). `alters_march`:
+    with it on, the march no longer takes each plain step (longer steps, a
+    packet's cone), which what reads the plain march (glow, step-count AO)
+    rules out."""
+    name: str
+    on: Callable[[object], bool]
+    alters_march: bool = False
+
+
+@dataclass(frozen=True)
+class Constant:
+    """The `#define` lines the kernel reads a key's value by (emit): `name`
+    with the value (of a number, whole number or 3-vector key; a 3-vector
+    as NAME_R, NAME_G, NAME_B), or those `values(value)` gives as
+    {name: value} (numbers, truths, 3-vectors); written where the feature
+    `when` is on (None: the key's own feature, or its block's; a key with
+    neither, or `always`: in every kernel)."""
+    name: str = ""
+    values: Callable[[object], dict] | None = None
+    when: Feature | None = None
+    always: bool = False
+
+
 # ---- parameters ------------------------------------------------------------------
 
 @dataclass(frozen=True)
@@ -166,6 +195,8 @@ class Parameter:
     words: tuple[str, ...] = ()
     block: type | None = None
     runtime: bool = False          # a render key the kernel takes as an argument: no rebuild
+    feature: Feature | None = None     # the kernel's blocks the key turns on
+    constant: Constant | None = None   # the #defines the kernel reads its value by
 
     def __post_init__(self):
         # a type or constraint still spelt as text ("num", ">0") fails where it is declared, not in a check
@@ -209,6 +240,11 @@ class Parameter:
         return None
 
 
+def empty_range(low: float, high: float) -> str:
+    """The message of a declared range [low, high] with low > high."""
+    return f"the range [{low:g}, {high:g}] is empty"
+
+
 def range_violation(name: str, value: float, low: float | None, high: float | None) -> str | None:
     """A declared param's (or formula parameter's) value outside its range [low, high]."""
     if (low is not None and value < low) or (high is not None and value > high):
@@ -219,13 +255,17 @@ def range_violation(name: str, value: float, low: float | None, high: float | No
 # ---- keys declared beside their fields --------------------------------------------
 
 def key(default, type_: Type, *constraints: Constraint, words=(), block: type | None = None,
-        runtime: bool = False, field_default: bool = True):
+        runtime: bool = False, field_default: bool = True, feature: Feature | None = None,
+        constant: str | Constant | None = None):
     """A dataclass field that is a block's key: the Parameter a file's,
     the command line's and the API's values of it are checked against
-    (`keys_of`). `field_default=False`: the default is the key's only
-    (the field holds another form of it, as a material's IR)."""
+    (`keys_of`), and what the kernel reads of it: the `feature` its value
+    turns on, the `constant` (a name, or a Constant) it is read by.
+    `field_default=False`: the default is the key's only (the field holds
+    another form of it, as a material's IR)."""
     spec = dict(type=type_, default=default, constraints=constraints, words=tuple(words), block=block,
-                runtime=runtime)
+                runtime=runtime, feature=feature,
+                constant=Constant(constant) if isinstance(constant, str) else constant)
     return field(default=default if field_default else MISSING, metadata={"key": spec})
 
 

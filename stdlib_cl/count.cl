@@ -1,14 +1,16 @@
-// The counting build of `fractalc bench --count` (fractalc/count.py): the
-// engine and the library call its hooks, COUNT_EVALUATIONS before each
-// distance evaluation, COUNT_MARCH before a march, COUNT_SCOPE before a
-// function that serves the rays of a mask (a normal, AO); each hook is a
-// line of its own, which the emitter drops from every other kernel. The
-// emitter writes COUNT_ITERATIONS into each loop of the distance estimate
-// of this build alone. Only
-// this build has them: there `params` is a __global buffer whose values
-// are followed, from COUNT_BASE, by COUNT_SLOTS reals (one per ray) per
-// work-item. Rays are counted where they are marched (their lanes of a
+// The counting build of `fractalc bench --count` (fractalc/count.py), placed
+// after the prelude: the engine and the library call its hooks,
+// COUNT_EVALUATIONS before each distance evaluation, COUNT_MARCH before a
+// march, COUNT_SCOPE before a function that serves the rays of a mask (a
+// normal, AO); each hook is a line of its own, which the emitter drops from
+// every other kernel. The emitter writes COUNT_ITERATIONS into each loop of
+// the distance estimate of this build alone. Only this build has them:
+// there `params` is a __global buffer whose values are followed, from
+// COUNT_BASE (a constant of the build), by COUNT_SLOTS reals (one per ray)
+// per work-item. Rays are counted where they are marched (their lanes of a
 // mask), not the lanes a vector evaluates along with them.
+#undef PARAMS_SPACE
+#define PARAMS_SPACE __global
 #define COUNT_CAMERA 0
 #define COUNT_NORMALS 1
 #define COUNT_SHADOWS 2

@@ -6,7 +6,7 @@
 // Distance estimates at points: `points` holds count x's, then count y's,
 // then count z's (count a multiple of LANES); `distances` gets count values.
 __kernel VECTOR_LANES_HINT void distance_at_points(__global const scalar *points, __global scalar *distances,
-                       __constant scalar *params, int count) {
+                       PARAMS_SPACE scalar *params, int count) {
     int i = get_global_id(0);
     vec3 p = v3(LOAD_LANES(i, points), LOAD_LANES(i, points + count),
                 LOAD_LANES(i, points + 2 * count));

@@ -245,7 +245,7 @@ vec3 area_light_seen(vec3 origin, vec3 dir, real reach, real density, mask delta
 // `first + 2 i` and `first + 2 i + 1`).
 vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albedo, real diffuse_weight,
                   real glossy_weight, real alpha, mask active, lane_uint key, uint first, scalar pixel_angle,
-                  __constant scalar *params) {
+                  PARAMS_SPACE scalar *params) {
     vec3 total = v3((real)0.0f, 0.0f, 0.0f);
     for (int i = 0; i < LIGHT_COUNT; i++) {
         __constant scalar *light = LIGHTS + i * LIGHT_STRIDE;
@@ -354,7 +354,7 @@ vec3 direct_light(vec3 p, vec3 lifted, vec3 n, vec3 to_eye, vec3 eye, vec3 albed
 // The radiance one camera sample brings back along `dir` from `origin`,
 // whose march `m` hit where `normal` says (or missed).
 vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel_angle, lane_uint key,
-                __constant scalar *params) {
+                PARAMS_SPACE scalar *params) {
     vec3 eye = origin;
     vec3 radiance = v3_scale(environment(dir), SELECT((real)CAMERA_SEES_ENVIRONMENT, (real)0.0f, m.hit));
     vec3 throughput = v3((real)1.0f, 1.0f, 1.0f);

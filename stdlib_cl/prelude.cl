@@ -106,6 +106,10 @@ REFINED_RSQRT_OF(real)
 // bulb-640's frame; docs/performance.md)
 #define ALWAYS_INLINE __attribute__((always_inline))
 
+// The params buffer's address space: the counting build (count.cl) makes it
+// __global, for the counters that follow the params there
+#define PARAMS_SPACE __constant
+
 typedef struct { real x, y, z; } vec3;
 
 vec3 v3(real x, real y, real z) { vec3 v = { x, y, z }; return v; }

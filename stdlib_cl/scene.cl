@@ -1,18 +1,22 @@
 // Templates of the functions the emitter writes from a scene's IR
 // (fractalc/emit.py) around the statements computing it: `$body` is those
-// statements, each line ending in a newline. A `//@ NAME` line opens the
-// template NAME (fractalc/stdlib.py `templates`).
+// statements, each line ending in a newline; and of the tables of values it
+// writes (fractalc/pathtrace.py). A `//@ NAME` line opens the template NAME
+// (fractalc/stdlib.py `templates`).
+
+//@ distance_signature  the scene's distance estimate at a point, which the engine and distance_at_points call
+ALWAYS_INLINE real distance_estimate(vec3 p, PARAMS_SPACE scalar *params)
 
 //@ surface_at  the surface properties at a point: the nearest part's material
 typedef struct { real $fields; } surface;
 
-surface surface_at(vec3 p, __constant scalar *params) {
+surface surface_at(vec3 p, PARAMS_SPACE scalar *params) {
 ${body}    surface s = { $values };
     return s;
 }
 
 //@ scene_bound  the radius and (through `centre`) the centre of a sphere holding the scene but its ground half-spaces
-real scene_bound(__constant scalar *params, vec3 *centre) {
+real scene_bound(PARAMS_SPACE scalar *params, vec3 *centre) {
 ${body}    *centre = v3($x, $y, $z);
     return $radius;
 }
@@ -20,7 +24,7 @@ ${body}    *centre = v3($x, $y, $z);
 //@ clear_of_half_spaces  `$tests`: a half_space_test per ground half-space
 // Whether rays from `origin` along `dir` stay clear of every ground half-space
 // n.p <= offset: they start above it (by `height`) and move away from it.
-mask clear_of_half_spaces(vec3 origin, vec3 dir, real height, __constant scalar *params) {
+mask clear_of_half_spaces(vec3 origin, vec3 dir, real height, PARAMS_SPACE scalar *params) {
 ${body}    mask clear = MASK_TRUE;
 ${tests}    return clear;
 }
@@ -30,11 +34,11 @@ ${tests}    return clear;
         clear = clear & (v3_dot(origin, n) - $offset >= height) & (v3_dot(dir, n) >= 0.0f);   }
 
 //@ normals  `estimate_normal` at any point, and `estimate_hit_normal` where a march hit with the estimate `here`
-vec3 estimate_normal(vec3 p, real h, __constant scalar *params) {
+vec3 estimate_normal(vec3 p, real h, PARAMS_SPACE scalar *params) {
     return $anywhere;
 }
 
-vec3 estimate_hit_normal(vec3 p, real here, real h, __constant scalar *params) {
+vec3 estimate_hit_normal(vec3 p, real here, real h, PARAMS_SPACE scalar *params) {
     return $at_hit;
 }
 
@@ -48,7 +52,7 @@ forward_normal(p, distance_estimate(p, params), h, params)
 forward_normal(p, here, h, params)
 
 //@ uniform_values  a kernel writing point-independent values (a scene's bound) into `out`, one work-item
-__kernel void uniform_values(__constant scalar *params, __global scalar *out) {
+__kernel void uniform_values(PARAMS_SPACE scalar *params, __global scalar *out) {
 ${body}${stores}}
 
 //@ uniform_store
@@ -111,3 +115,13 @@ ${text}
 #define LANES 1
 #define PRECISION_DOUBLE ${double}
 #define FAST_MATH 0
+
+//@ float_table  values the kernel reads by index (the environment's), `$values` separated by commas
+__constant float $name[] = {$values};
+
+//@ lights_table  the path tracer's lights (fractalc/lights.py), `$rows` each ending in a newline; never empty (C has no empty arrays)
+__constant scalar LIGHTS[] = {
+${rows}};
+
+//@ lights_row  a light's LIGHT_STRIDE values, separated by commas
+    $values,

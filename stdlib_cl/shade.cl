@@ -7,7 +7,7 @@
 
 //@ signature  `shade`: the shaded colour at a hit
 vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, real steps, mask hit,
-           __constant scalar *params) {
+           PARAMS_SPACE scalar *params) {
 
 //@ passes_signature  `shade_passes`: the same, filling in the shading passes
 typedef struct {
@@ -16,7 +16,7 @@ typedef struct {
 } shading_passes;
 
 vec3 shade_passes(vec3 p, vec3 normal, vec3 dir, real threshold, real steps, mask hit,
-           __constant scalar *params, shading_passes *passes) {
+           PARAMS_SPACE scalar *params, shading_passes *passes) {
 
 //@ surface  the hit's material, seen from the eye
     surface s = surface_at(p, params);

@@ -8,6 +8,8 @@ import pytest
 
 from fractalc.cli import main
 
+pytestmark = pytest.mark.check
+
 SCENE = textwrap.dedent("""\
     scene sphere(1)
     camera { position: (0, -4, 1), target: (0, 0, 0), fov: 40 }

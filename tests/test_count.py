@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import fractalc
-from fractalc.count import PURPOSES, count, counting_source
+from fractalc.count import PURPOSES, count
 
 # one pixel whose ray runs along z, `offset` to the side of the sphere's
 # centre; glow keeps the scene's bound out of the march (it starts at t = 0),
@@ -155,7 +155,22 @@ def test_normal_kernels_hold_no_counting_code():
         for lanes in (1, 8):
             source = scene.kernel_source(lanes=lanes)
             assert not re.search(r"\bcount_\w+\(|COUNT_|\bscoped\(|march_purpose", source)
-            assert "__constant scalar *params" in source
+            # the params stay in constant memory: the prelude's address space, never the counting build's
+            assert "#define PARAMS_SPACE __constant" in source and "PARAMS_SPACE scalar *params" in source
+            assert "PARAMS_SPACE __global" not in source and "#undef PARAMS_SPACE" not in source
+
+
+def test_the_counting_build_is_emitted_with_params_in_global_memory():
+    """No edit of the emitted text: count.cl, after the prelude, redefines
+    the params' address space; its counters start after the derived slots."""
+    from fractalc.emit import Target, emit
+    from fractalc.hoist import DERIVED_SLOTS
+    from fractalc.lower import lower
+    scene = fractalc.loads(BULB)
+    source = emit(lower(scene.checked), Target(lanes=8, count=True))
+    prelude, counting = source.index("#define PARAMS_SPACE __constant"), source.index("#define PARAMS_SPACE __global")
+    assert prelude < counting < source.index("PARAMS_SPACE scalar *params")
+    assert f"#define COUNT_BASE {len(scene.checked.params) + DERIVED_SLOTS}" in source
 
 
 @pytest.mark.opencl
@@ -178,7 +193,7 @@ def test_every_evaluation_in_the_counting_build_is_counted():
     from fractalc.emit import emit
     from fractalc.lower import lower
     target = replace(scene.renderer().target, count=True)
-    source = counting_source(emit(lower(scene.checked), target), 0, False)
+    source = emit(lower(scene.checked), target)
     code = "\n".join(line for line in source.splitlines() if not line.lstrip().startswith("//"))
     functions = re.split(r"\n(?=\S)", code)
     evaluating = [f for f in functions if "distance_estimate(" in f.split("{", 1)[-1]

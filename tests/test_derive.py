@@ -11,6 +11,8 @@ from fractalc import derive, formulas, fractals, ir
 from fractalc.emit import function_source
 from kernel_harness import evaluate_in_kernel
 
+pytestmark = pytest.mark.emit
+
 P = ir.components(ir.Var("p", ir.VEC3))
 RNG = np.random.default_rng(20261127)
 

@@ -15,6 +15,8 @@ from fractalc.cli import main
 from fractalc.errors import LINE_BREAK, Span, diagnostic
 from fractalc.parse import parse
 
+pytestmark = pytest.mark.check
+
 CAMERA = "camera { position: (0, -4, 1), target: (0, 0, 0) }\n"
 
 

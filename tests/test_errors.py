@@ -11,6 +11,8 @@ import pytest
 
 import fractalc
 
+pytestmark = pytest.mark.check
+
 REPO = Path(__file__).resolve().parents[1]
 MARK = "»"  # in a test scene, marks where an error must be reported
 CAMERA = "camera { position: (0, 0, 5), target: (0, 0, 0) }"

@@ -17,6 +17,8 @@ from fractalc.check import library_formulas
 from fractalc.errors import SceneError
 from fractalc.parse import parse
 
+pytestmark = pytest.mark.check
+
 POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
 
 
@@ -72,7 +74,7 @@ MISTAKES = [
     ("formula f() {\n    z = z * 2 + c\n    d = linear_estimate()\n}\nscene fractal(f())", "3:9",
      "use it in a 'final' line"),
     ("formula f() {\n    z = z.xyq + c\n}\nscene fractal(f())", "2:11", "'.xyq' is not a component of a 3-vector"),
-    ("formula f() {\n    z = (z, 1) + c\n}\nscene fractal(f())", "2:9", "'+' on vectors of different sizes (4 and 3)"),
+    ("formula f() {\n    z = (z, 1) + c\n}\nscene fractal(f())", "2:9", "'+' on vectors of different sizes (3 and 4)"),
     ("formula f() {\n    z = z.scale(2) + c\n}\nscene fractal(f())", "2:11", "transforms shapes; in a formula"),
     ("formula f() {\n    z = z * log(0) + c\n}\nscene fractal(f())", "2:13", "'log' is undefined for these values"),
     (DOUBLE + "scene f() | sphere(1)", "4:7", "this is a formula: make it a shape with 'fractal("),

@@ -22,6 +22,8 @@ from fractalc.emit import double_literals, function_source
 from fractalc.parse import parse
 from fractalc.types import Type
 
+pytestmark = pytest.mark.emit
+
 POINT = tuple(ir.Comp(ir.Var("p", ir.VEC3), i) for i in range(3))
 # 95th percentile of the relative error; float: measured at most 4.0e-5
 # (PoCL) and 8.3e-5 (Intel's runtime), both kifs_icosahedral

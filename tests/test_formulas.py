@@ -13,6 +13,8 @@ from fractalc import derive, formula_code, ir
 from fractalc import formulas as F
 from kernel_harness import evaluate_in_kernel
 
+pytestmark = pytest.mark.emit
+
 P = ir.components(ir.Var("p", ir.VEC3))
 RNG = np.random.default_rng(7)
 ITERATIONS = ir.Const(12.0, ir.INT)

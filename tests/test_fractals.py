@@ -24,7 +24,9 @@ from test_fractal_library import ball, relative_error, shell, tolerance
 
 PRECISIONS = ("float", "double")
 SQRT3 = np.sqrt(3.0)
-from fractalc.lower import BOUND_MARGIN as MARGIN   # evaluated within (1 + MARGIN) R
+from fractalc.ir import BOUND_MARGIN as MARGIN   # evaluated within (1 + MARGIN) R
+
+pytestmark = pytest.mark.emit
 ULP = {"float": np.finfo(np.float32).eps, "double": np.finfo(np.float64).eps}
 
 DEFAULTS = {

@@ -11,6 +11,8 @@ import pytest
 
 import fractalc
 
+pytestmark = pytest.mark.check
+
 # ---- params in every argument position (uniform and per-ray values mixed) --
 
 # Each shape uses the param `a` (= 1 by default) somewhere; written with `1`

@@ -13,6 +13,8 @@ import fractalc
 from fractalc import ir
 from fractalc.emit import function_source
 
+pytestmark = pytest.mark.emit
+
 X, Y, Z = ir.Param(0, "x"), ir.Param(1, "y"), ir.Param(2, "z")
 
 # a point inside each op's domain (x, y, z), away from kinks

@@ -12,6 +12,8 @@ from fractalc.program import (CAMERA_KEYS, LIGHT_KEYS, RENDER_KEYS, Camera, Ligh
                               RenderSettings, Shadows)
 from fractalc.types import Comparison, Parameter, Type, at_most, between, parse_constraint
 
+pytestmark = pytest.mark.check
+
 
 def _checked(text: str):
     return check(parse(text, "scene.frac"))

@@ -13,6 +13,8 @@ import fractalc
 from fractalc import parse as parse_module
 from fractalc.parse import parse
 
+pytestmark = pytest.mark.check
+
 EXAMPLES = sorted(glob.glob(os.path.join(os.path.dirname(__file__), "..", "examples", "*.frac"))
                   + glob.glob(os.path.join(os.path.dirname(__file__), "..", "stdlib_frac", "*.frac")))
 

@@ -11,6 +11,8 @@ from fractalc import ir, ranges
 from fractalc.emit import Target, emit, emit_distance
 from fractalc.lower import lower
 
+pytestmark = pytest.mark.emit
+
 BULB = """
 param power = 8 in [2, 16]
 param angle = 30 in [0, 90]

@@ -1,35 +1,43 @@
-"""The transforms' lowering table (fractalc/lower.py TRANSFORM_LOWERINGS):
-each transform of the language has its point map, distance fix and bound
-update, said in one entry, and a transform without one stops the import.
-Pure Python: no OpenCL."""
+"""The transforms' table (fractalc/transforms.py TRANSFORMS): each
+transform of the language is one entry holding its signature and its
+lowering (point map, distance fix, bound update), and an entry without
+one of them stops the import. Pure Python: no OpenCL."""
 import dataclasses
 import subprocess
 import sys
 
 import pytest
 
-from fractalc import ir, lower, stdlib
+from fractalc import ir, lower, transforms
 
 import fractalc
 
+pytestmark = pytest.mark.emit
 
-def test_every_transform_of_the_language_has_one_lowering_of_three_parts():
-    assert set(lower.TRANSFORM_LOWERINGS) == set(stdlib.TRANSFORMS) - set(lower.SURFACE_TRANSFORMS)
-    parts = [f for f in dataclasses.fields(lower.TransformLowering)]
-    assert [f.name for f in parts] == ["point", "distance", "bound"]
+
+def test_every_transform_of_the_language_has_its_signature_and_three_lowering_parts():
+    parts = [f for f in dataclasses.fields(transforms.Transform)]
+    assert [f.name for f in parts] == ["signature", "point", "distance", "bound"]
     assert all(f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING for f in parts)
+    assert all(t.signature.name == name and t.signature.kind == "transform"
+               for name, t in transforms.TRANSFORMS.items())
+    assert set(transforms.SIGNATURES) == {*transforms.TRANSFORMS, "material", "color"}
     with pytest.raises(TypeError):      # no bound update
-        lower.TransformLowering(lambda point, args: point, lambda d, args, point, shape: d)
+        transforms.Transform(transforms.TRANSFORMS["twist"].signature, lambda point, args: point,
+                             lambda d, args, point, inner_bound: d)
 
 
-def test_a_transform_without_a_lowering_stops_the_import():
+def test_a_transform_without_its_lowering_stops_the_import():
     code = ("import importlib\n"
-            "from fractalc import lower, stdlib\n"
-            "stdlib.TRANSFORMS['shear'] = stdlib.TRANSFORMS['twist']\n"
-            "importlib.reload(lower)\n")
+            "from fractalc import transforms\n"
+            "source = open(transforms.__file__).read()\n"
+            "source = source.replace('\"onion\": Transform(', '\"shear\": Transform(_signature(\"shear\")), '\n"
+            "                        '\"onion\": Transform(')\n"
+            "exec(compile(source, transforms.__file__, 'exec'), {'__name__': 'fractalc.transforms', "
+            "'__package__': 'fractalc'})\n")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert result.returncode != 0
-    assert "ImportError: transforms without a lowering: ['shear']" in result.stderr
+    assert "TypeError: Transform.__init__() missing 3 required positional arguments" in result.stderr
 
 
 def _bound(text):

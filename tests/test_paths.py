@@ -16,6 +16,8 @@ from fractalc.parse import parse
 from fractalc.paths import camera_at, frame_times, interpolate, params_at, tangents
 from fractalc.program import Camera
 
+pytestmark = pytest.mark.check
+
 REPO = Path(__file__).resolve().parents[1]
 
 TIMES = np.array([0.0, 1.0, 1.5, 4.0, 4.2])

@@ -12,6 +12,8 @@ from fractalc.check import check
 from fractalc.parse import parse
 from test_large_input import as_data, lark_decls
 
+pytestmark = pytest.mark.check
+
 SCENE = """\
 param blend = 0.25 in [0, 1]
 param size = 1

@@ -17,6 +17,8 @@ from fractalc.program import Keyframe
 from fractalc.studio import edits
 from fractalc.studio.session import Refused, key_edit, text_with_state
 
+pytestmark = pytest.mark.check
+
 SCENE = """\
 # A scene as a person writes it: comments, alignment, blocks of each layout.
 param blend = 0.25 in [0, 1]     # how far the spheres melt together

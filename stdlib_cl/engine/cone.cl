@@ -37,7 +37,7 @@ scalar lanes_max(real v) {
 // which are its rays' first march steps (each ray's steps, max_steps
 // included, count them).
 real cone_start(vec3 origin, vec3 dir, mask active, real t_enter, real t_exit, scalar pixel_angle,
-                int *steps, __constant scalar *params) {
+                int *steps, PARAMS_SPACE scalar *params) {
     *steps = 0;
     if (!ANY(active))
         return t_enter;

@@ -1,9 +1,9 @@
 // The fixed ray-marching template (sphere tracing, Hart 1996).
 // The generated code above this file defines:
-//   real distance_estimate(vec3 p, __constant scalar *params);
+//   real distance_estimate(vec3 p, PARAMS_SPACE scalar *params);
 //   vec3 shade(vec3 p, vec3 normal, vec3 dir, real threshold, real steps, mask hit,
-//              __constant scalar *params);
-//   real scene_bound(__constant scalar *params, vec3 *centre);  (a bounded scene)
+//              PARAMS_SPACE scalar *params);
+//   real scene_bound(PARAMS_SPACE scalar *params, vec3 *centre);  (a bounded scene)
 //   vec3 shade_passes(..., shading_passes *passes);  (with the shading passes)
 //   MAX_STEPS, MAX_DISTANCE, HIT_EPSILON (0 = pixel footprint), BACKGROUND,
 //   LANES_X, LANES_Y, LANE_X, LANE_Y, the output's CHANNELS and each

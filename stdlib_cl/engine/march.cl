@@ -5,7 +5,7 @@
 // II: steps and glow then vary smoothly between neighbouring pixels). A
 // `packet` of rays (the camera's, uniform) is cone-marched first.
 march_result march_rays(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real jitter, int packet,
-                        __constant scalar *params) {
+                        PARAMS_SPACE scalar *params) {
     march_result r;
     r.t = 0.0f;
     r.hit = (mask)0;
@@ -99,12 +99,12 @@ march_result march_rays(vec3 origin, vec3 dir, mask active, scalar pixel_angle, 
 }
 
 march_result march(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real jitter,
-                   __constant scalar *params) {
+                   PARAMS_SPACE scalar *params) {
     return march_rays(origin, dir, active, pixel_angle, jitter, 0, params);
 }
 
 // The camera's rays through a work-item's pixels: a packet.
 march_result march_camera(vec3 origin, vec3 dir, mask active, scalar pixel_angle, real jitter,
-                          __constant scalar *params) {
+                          PARAMS_SPACE scalar *params) {
     return march_rays(origin, dir, active, pixel_angle, jitter, 1, params);
 }

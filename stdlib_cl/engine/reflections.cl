@@ -4,7 +4,7 @@
 // what its mirror direction sees; a bounce that misses sees the background
 // (with fog: the fog, and what it hits is fogged along the bounce).
 vec3 reflected_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 seen_first,
-                     scalar pixel_angle, __constant scalar *params) {
+                     scalar pixel_angle, PARAMS_SPACE scalar *params) {
     mask active = m.hit;
     vec3 p = v3_add(origin, v3_scale(dir, m.t));
     real threshold = hit_threshold(m.t, pixel_angle);

@@ -15,7 +15,7 @@ vec3 refracted(vec3 dir, vec3 normal, real eta) {
 // out; returns the way out, and in *out_start where the ray goes on (lifted
 // off the far side). Lanes not `active` are not marched.
 vec3 through_solid(vec3 p, vec3 dir, vec3 normal, real ior, real threshold, mask active, vec3 *out_start,
-                   __constant scalar *params) {
+                   PARAMS_SPACE scalar *params) {
     vec3 inside_dir = refracted(dir, normal, 1.0f / ior);
     // Inside is where the distance is below the hit threshold, as at the hit
     // `p` itself. A signed distance is marched by the depth -d; the inside of
@@ -56,7 +56,7 @@ vec3 through_solid(vec3 p, vec3 dir, vec3 normal, real ior, real threshold, mask
 // Transparency: what the ray sees through the solid (through_solid) is
 // mixed in by `transparency`.
 vec3 transmitted_color(vec3 origin, vec3 dir, march_result m, vec3 normal, vec3 seen,
-                       scalar pixel_angle, __constant scalar *params) {
+                       scalar pixel_angle, PARAMS_SPACE scalar *params) {
     vec3 p = v3_add(origin, v3_scale(dir, m.t));
     surface s = surface_at(p, params);
     mask active = m.hit & (s.transparency > 0.0f);

@@ -7,7 +7,7 @@
 // pixel (x, y) at (y * pitch + x) * CHANNELS; pitch >= width and its row
 // count >= height are multiples of LANES_X and LANES_Y (blocks past the
 // image's edge write there).
-__kernel VECTOR_LANES_HINT void render(__global float *out, __constant scalar *params,
+__kernel VECTOR_LANES_HINT void render(__global float *out, PARAMS_SPACE scalar *params,
                      __constant scalar *camera, int width, int height,
                      int x0, int y0, int pitch, int samples, uint seed) {
     int gx = get_global_id(0), gy = get_global_id(1);

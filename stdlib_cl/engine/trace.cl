@@ -1,13 +1,13 @@
 #if FEATURE_PATH_TRACE
 // The path tracer's colour of one sample (stdlib_cl/pathtrace.cl, after this file).
 vec3 path_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel_angle, lane_uint key,
-                __constant scalar *params);
+                PARAMS_SPACE scalar *params);
 #endif
 
 // Colour seen along one ray: the shaded surface or the background, then
 // transparency, reflections, fog and glow.
 vec3 trace_color(vec3 origin, vec3 dir, march_result m, vec3 normal, scalar pixel_angle,
-                 __constant scalar *params) {
+                 PARAMS_SPACE scalar *params) {
     vec3 color = background_seen(dir);
     if (ANY(m.hit)) {
         vec3 p = v3_add(origin, v3_scale(dir, m.t));

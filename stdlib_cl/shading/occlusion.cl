@@ -6,7 +6,7 @@
 // every nearer one is too, since the distance changes by at most the step
 // between them (d_i >= d_k - (k - i) delta >= i delta), so the ray's
 // remaining samples would add nothing and are not taken.
-real ambient_occlusion(vec3 p, vec3 normal, real delta, real strength, __constant scalar *params) {
+real ambient_occlusion(vec3 p, vec3 normal, real delta, real strength, PARAMS_SPACE scalar *params) {
     real occlusion = 0.0f;
     real weight = 1.0f / 32.0f;      // 0.5^i for the sample i
     mask open = (mask)0;

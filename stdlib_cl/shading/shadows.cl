@@ -10,7 +10,7 @@
 // were within 20 thresholds of the start (1.3 and 2 saved less: 2
 // overshoots often, and falls back).
 real hard_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, mask active,
-                 __constant scalar *params) {
+                 PARAMS_SPACE scalar *params) {
     real t = 2.0f * threshold;
     real visible = 1.0f;
     real omega = 1.6f, previous = 0.0f, step = 0.0f;
@@ -42,7 +42,7 @@ real hard_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, mask ac
 // two to four times.) Scenes without transparency keep `hard_shadow`: on
 // PoCL a longer body in this loop costs more than the steps it saves.
 real hard_shadow_through(vec3 origin, vec3 to_light, real max_t, real threshold, mask active,
-                         __constant scalar *params) {
+                         PARAMS_SPACE scalar *params) {
     real t = 2.0f * threshold;
     real visible = 1.0f;
     mask clear_of_surface = MASK_TRUE;
@@ -69,7 +69,7 @@ real hard_shadow_through(vec3 origin, vec3 to_light, real max_t, real threshold,
 // inside it, `ratio` = d(b) / b, is below both ends: halvings of the
 // bracket about its lowest point, two evaluations each.
 real lowest_ratio(vec3 origin, vec3 to_light, real a, real b, real c, real ratio,
-                  __constant scalar *params) {
+                  PARAMS_SPACE scalar *params) {
     for (int i = 0; i < 4; i++) {
         real left = 0.5f * (a + b), right = 0.5f * (b + c);
         COUNT_EVALUATIONS(COUNT_SHADOWS, scoped(params), 2.0f);
@@ -98,7 +98,7 @@ real lowest_ratio(vec3 origin, vec3 to_light, real a, real b, real c, real ratio
 // sample (its sphere and the last one's do not overlap) still dims the light
 // by its d / t, but the samples of the dip test are the ones stepped from.
 real soft_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, real k, mask active,
-                 __constant scalar *params) {
+                 PARAMS_SPACE scalar *params) {
     real t = 2.0f * threshold;
     real visible = 1.0f;
     // the previous two samples: ray distances and d / t; the last one's d

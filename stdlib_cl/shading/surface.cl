@@ -3,7 +3,7 @@
 // hit threshold, so that detail below the pixel footprint is not amplified:
 // tetrahedral (4 evaluations, Quilez "normals for an SDF"), central (6), or
 // forward (3: the march's last evaluation, at the hit, is the fourth).
-vec3 tetrahedral_normal(vec3 p, real h, __constant scalar *params) {
+vec3 tetrahedral_normal(vec3 p, real h, PARAMS_SPACE scalar *params) {
     COUNT_EVALUATIONS(COUNT_NORMALS, scoped(params), 4.0f);
     real a = distance_estimate(v3(p.x + h, p.y - h, p.z - h), params);
     real b = distance_estimate(v3(p.x - h, p.y - h, p.z + h), params);
@@ -17,7 +17,7 @@ vec3 tetrahedral_normal(vec3 p, real h, __constant scalar *params) {
 // Forward differences from `p`, whose estimate `here` the march already
 // took: one evaluation fewer than the tetrahedron, with a first-order error
 // (h times the surface's curvature; h is one hit threshold).
-vec3 forward_normal(vec3 p, real here, real h, __constant scalar *params) {
+vec3 forward_normal(vec3 p, real here, real h, PARAMS_SPACE scalar *params) {
     COUNT_EVALUATIONS(COUNT_NORMALS, scoped(params), 3.0f);
     real dx = distance_estimate(v3(p.x + h, p.y, p.z), params) - here;
     real dy = distance_estimate(v3(p.x, p.y + h, p.z), params) - here;
@@ -25,7 +25,7 @@ vec3 forward_normal(vec3 p, real here, real h, __constant scalar *params) {
     return v3_normalize(v3(dx, dy, dz));
 }
 
-vec3 central_normal(vec3 p, real h, __constant scalar *params) {
+vec3 central_normal(vec3 p, real h, PARAMS_SPACE scalar *params) {
     COUNT_EVALUATIONS(COUNT_NORMALS, scoped(params), 6.0f);
     real dx = distance_estimate(v3(p.x + h, p.y, p.z), params) - distance_estimate(v3(p.x - h, p.y, p.z), params);
     real dy = distance_estimate(v3(p.x, p.y + h, p.z), params) - distance_estimate(v3(p.x, p.y - h, p.z), params);
