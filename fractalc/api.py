@@ -27,7 +27,7 @@ from .build import build
 from .check import check, check_param_values, check_value, unknown_param
 from .cluster import render_still
 from .denoise import denoise_image, require_denoiser
-from .devices import open_device, refines_rsqrt
+from .devices import build_options, open_device, refines_rsqrt
 from .emit import Target, emit, emit_distance, uniform_source
 from .errors import RenderError, SceneError, diagnostic
 from .image import Image, image_from_pixels, require_image_memory
@@ -169,7 +169,8 @@ class Scene:
                 raise RenderError(f"the OpenCL device '{device.info.name}' does not support double precision")
             self._targets[settings.precision] = Target(lanes=self.lanes_in_use, double=double,
                                                        exact_native=device.lane_choice.native_exact,
-                                                       refined_rsqrt=refines_rsqrt(device.info))
+                                                       refined_rsqrt=refines_rsqrt(device.info),
+                                                       build_options=build_options(device.info, double))
         return self._targets[settings.precision]
 
     @property
@@ -201,8 +202,8 @@ class Scene:
             return self._programs[key]   # no lowering or emitting per frame
         lens = Camera(aperture=1.0 if camera.aperture > 0 else 0.0)
         source = emit(lower(replace(self.checked, render=key[0], camera=lens)), target)
-        self._programs[key] = run.RenderKernel(build(source, self.device, use_cache=use_cache), self.device,
-                                               target.lanes, target.double)
+        program = build(source, self.device, target.build_options, use_cache=use_cache)
+        self._programs[key] = run.RenderKernel(program, self.device, target.lanes, target.double)
         return self._programs[key]
 
     def set_defaults(self, camera: Camera | None = None, **render_keys) -> None:
@@ -279,7 +280,7 @@ class Scene:
         key = ("distance", escape_time_sets, self.checked.render, target)
         if key not in self._programs:
             source = emit_distance(lower(self.checked, escape_time_sets=escape_time_sets), target)
-            self._programs[key] = build(source, self.device, kernels=("distance_at_points",))
+            self._programs[key] = build(source, self.device, target.build_options, kernels=("distance_at_points",))
         return self._programs[key], target
 
     def escape_time_set(self, points) -> np.ndarray:

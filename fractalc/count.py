@@ -76,7 +76,8 @@ def count(scene, width: int | None = None, height: int | None = None, camera=Non
     settings, params = renderer.settings, renderer.params
     width, height = width or settings.width, height or settings.height
     target = replace(renderer.target, count=True)
-    program = build(emit(lower(replace(scene.checked, render=settings, camera=renderer.camera)), target), scene.device)
+    program = build(emit(lower(replace(scene.checked, render=settings, camera=renderer.camera)), target), scene.device,
+                    target.build_options)
     frame = replace(renderer.frame, width=width, height=height)
     counters = run.counted_render(program, scene.device, frame, params, target.lanes, target.double,
                                   COUNT_SLOTS, len(renderer.channels))

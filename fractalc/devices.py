@@ -85,6 +85,16 @@ def refines_rsqrt(info: DeviceInfo) -> bool:
     return is_intel_cpu(info)
 
 
+def build_options(info: DeviceInfo, double: bool) -> tuple[str, ...]:
+    """The OpenCL build options of a render or distance program, chosen by
+    measurement with the accuracy tests as the gate (emit.Target.build_options;
+    docs/performance.md): `-cl-unsafe-math-optimizations` for float kernels on
+    Intel's CPU runtime (bulb-640 about 6% faster; reassociation and fused
+    multiply-adds, not approximate functions: `-cl-fast-relaxed-math` is
+    10% faster still but fails them), none elsewhere (PoCL gains nothing)."""
+    return ("-cl-unsafe-math-optimizations",) if is_intel_cpu(info) and not double else ()
+
+
 def speed_rank(info: DeviceInfo) -> tuple:
     """Sort key of the default choice (see the module docstring): smaller is
     faster."""

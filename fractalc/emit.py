@@ -38,6 +38,7 @@ class Target:
     exact_native: bool = False  # the device's native_ functions are exact (lanes.LaneChoice.native_exact)
     count: bool = False     # the counting build's hooks kept (stdlib_cl/count.cl, fractalc/count.py)
     refined_rsqrt: bool = False  # rsqrt as native_rsqrt and a Newton step (devices.refines_rsqrt)
+    build_options: tuple[str, ...] = ()  # the program's OpenCL build options (devices.build_options)
 
 
 def literal(value: float) -> str:
@@ -696,7 +697,8 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         _scene_template("header", version=__version__, file=_comment_text(scene.file),
                         block="{} x {}".format(*lane_block(target.lanes)),
                         real=scalar if target.lanes == 1 else f"{scalar}{target.lanes}", lanes=target.lanes,
-                        scalar=scalar, params=params, slots=DERIVED_SLOTS) + "\n",
+                        scalar=scalar, params=params, slots=DERIVED_SLOTS,
+                        options=" ".join(target.build_options) or "no options") + "\n",
         _constants(scene_ir, target, on),
         lib.prelude,
         lib.counting if target.count else "",

@@ -422,8 +422,10 @@ def _estimate(escape: bool, z, rows, dr, offset: ir.Expr) -> ir.Expr:
 
 
 def _inside(z, bailout: ir.Expr) -> ir.Expr:
-    # |z| itself, not |z|^2 against bailout^2: formulas compute |z| anyway, and it is then computed once
-    return ir.op("le", ir.length(z), bailout)
+    # |z|^2 against bailout^2 (bailout > 0), not |z| against bailout, though
+    # formulas compute |z| anyway: the loop's test then waits for no square
+    # root, and the iteration that stops computes none (bulb-640 2-3%)
+    return ir.op("le", ir.dot(z, z), ir.mul(bailout, bailout))
 
 
 def _trap_added(traps, z) -> tuple:

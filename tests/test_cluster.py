@@ -104,8 +104,11 @@ def test_a_still_assembled_from_row_tiles_equals_the_local_render(client):
         assert planes.keys() == local.planes().keys()
         for name, plane in local.planes().items():
             np.testing.assert_array_equal(planes[name], plane, err_msg=name)
-    # the default: tiles of 4 rows, 24 / (4 tiles x 2 workers) rounded up to lane blocks
-    np.testing.assert_array_equal(scene.render(seed=3, samples=4, cluster=client).rgba, local.rgba)
+    # the default: tiles of 4 rows, 24 / (4 tiles x 2 workers) rounded up to lane blocks; without
+    # the P pass, so against the local render of the same kernel (another program may round
+    # otherwise where the driver's build options let it reassociate: devices.build_options)
+    np.testing.assert_array_equal(scene.render(seed=3, samples=4, cluster=client).rgba,
+                                  scene.render(seed=3, samples=4).rgba)
 
 
 @pytest.mark.opencl

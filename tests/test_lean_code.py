@@ -8,6 +8,7 @@ import pytest
 
 import fractalc
 from fractalc import ir, ranges
+from fractalc.devices import DeviceInfo, build_options
 from fractalc.emit import Target, emit, emit_distance
 from fractalc.lower import lower
 
@@ -63,6 +64,31 @@ def test_the_estimate_is_inlined_into_its_callers():
     source = fractalc.loads(BULB).kernel_source(lanes=8)
     assert re.search(r"^ALWAYS_INLINE real distance_estimate\(", source, re.M)
     assert "#define ALWAYS_INLINE __attribute__((always_inline))" in source
+
+
+@pytest.mark.parametrize("lanes", [1, 8])
+def test_the_bailout_test_takes_no_square_root(lanes):
+    # |z|^2 against bailout^2: the loop's test waits for no square root, and
+    # the iteration that stops computes none (the step's own |z| comes after)
+    source = fractalc.loads(BULB).kernel_source(lanes=lanes)
+    body = _function(source, "distance_estimate")
+    loop = body[body.index("for (int "):]
+    test = loop[:loop.index("break;")]
+    assert "sqrt(" not in test, test
+    assert re.search(r"<= 4\.0f\)", test), test
+    assert "sqrt(" in loop[len(test):]
+
+
+@pytest.mark.parametrize("shadows, function", [("hard", "hard_shadow"), ("soft", "soft_shadow")])
+def test_a_finished_shadow_ray_evaluates_the_end_of_its_ray(shadows, function):
+    # a lane whose shadow ray is blocked would otherwise evaluate where it
+    # stopped, at a surface, where a fractal's orbit iterates longest and
+    # keeps the loop going for the lanes still marching
+    source = fractalc.loads(BULB + f"light directional {{ direction: (0, 0, -1), shadows: {shadows} }}"
+                            ).kernel_source(lanes=8)
+    body = _function(source, function)
+    calls = re.findall(r"distance_estimate\((.*?), params\)", body)
+    assert calls and all("SELECT(max_t, t, active)" in call for call in calls), calls
 
 
 def test_distance_program_hoists_too():
@@ -182,7 +208,8 @@ def test_the_refined_rsqrt_is_within_an_ulp(vector, driver):
     lanes = device.lanes if vector else 1      # the widths the driver builds (lanes.py)
     source = "\n".join([f"#define LANES {lanes}", "#define PRECISION_DOUBLE 0", "#define FAST_MATH 0",
                         "#define REFINED_RSQRT 1", library().prelude, REFINED_RSQRT_KERNEL])
-    program = cl.Program(device.context, source).build()
+    # with the options that float programs on this driver are built with
+    program = cl.Program(device.context, source).build(options=list(build_options(device.info, False)))
     x = np.exp(np.random.default_rng(5).uniform(-30, 30, 4096 * lanes)).astype(np.float32)
     x[:2 * lanes:2], x[1:2 * lanes:2] = 0.0, np.inf         # exact there: inf and 0, not NaN
     out = np.empty(len(x) + len(x) // lanes, np.float32)
@@ -210,3 +237,37 @@ def test_the_refined_rsqrt_is_chosen_for_float_kernels_without_native_functions(
     double = lower(scene.checked.__class__(**{**scene.checked.__dict__,
                                               "render": scene.render_settings(precision="double")}))
     assert "#define REFINED_RSQRT 0" in emit(double, Target(lanes=8, double=True, refined_rsqrt=True))
+
+
+def test_build_options_are_chosen_per_driver():
+    # -cl-unsafe-math-optimizations for float programs on Intel's CPU
+    # runtime (about 6% of bulb-640 there, the accuracy tests passing with
+    # it); nothing on PoCL, where it gains nothing, nor in double
+    intel = DeviceInfo(0, "AMD EPYC", "Intel(R) OpenCL", "CPU", "OpenCL 3.0", True, 2, "2026.22")
+    pocl = DeviceInfo(1, "cpu", "Portable Computing Language", "CPU", "OpenCL 3.0", True, 2, "3.1",
+                      "OpenCL 3.0 PoCL 3.1")
+    assert build_options(intel, False) == ("-cl-unsafe-math-optimizations",)
+    assert build_options(intel, True) == ()
+    assert build_options(pocl, False) == ()
+    # a compiled kernel says how to build it
+    lowered = lower(fractalc.loads(BULB).checked)
+    assert "(build with no options;" in emit(lowered, Target(lanes=8))
+    assert "(build with -cl-unsafe-math-optimizations;" in emit(
+        lowered, Target(lanes=8, build_options=("-cl-unsafe-math-optimizations",)))
+
+
+@pytest.mark.opencl
+def test_the_device_builds_with_the_options_its_kernel_names(driver, monkeypatch):
+    from fractalc import api
+    scene = fractalc.loads(BULB, device=driver)
+    wanted = build_options(scene.device.info, False)
+    assert f"(build with {' '.join(wanted) or 'no options'};" in scene.kernel_source().split("\n")[2]
+    built = []
+    original = api.build
+
+    def recording(source, device, options=(), **keys):
+        built.append((source, tuple(options)))
+        return original(source, device, options, **keys)
+    monkeypatch.setattr(api, "build", recording)
+    scene.render(width=16, height=16, progress=False)
+    assert (scene.kernel_source(), wanted) in built
