@@ -501,6 +501,8 @@ def features(scene_ir: SceneIR) -> dict[str, bool]:
         **{f"PASS_{name.upper()}": name in render.aovs for name in PASSES},
         "SHADING_PASSES": bool(set(SHADING_PASSES) & set(render.aovs)),
         "ENVIRONMENT": pathtrace.uses_environment(render),
+        # the estimate iterates (a fractal's or a formula's loop): its cost varies with the point
+        "ITERATED_ESTIMATE": any(isinstance(node, ir.Loop) for node in ir.walk(scene_ir.distance)),
     }
 
 

@@ -81,14 +81,16 @@ def test_the_bailout_test_takes_no_square_root(lanes):
 
 @pytest.mark.parametrize("shadows, function", [("hard", "hard_shadow"), ("soft", "soft_shadow")])
 def test_a_finished_shadow_ray_evaluates_the_end_of_its_ray(shadows, function):
-    # a lane whose shadow ray is blocked would otherwise evaluate where it
-    # stopped, at a surface, where a fractal's orbit iterates longest and
-    # keeps the loop going for the lanes still marching
-    source = fractalc.loads(BULB + f"light directional {{ direction: (0, 0, -1), shadows: {shadows} }}"
-                            ).kernel_source(lanes=8)
-    body = _function(source, function)
-    calls = re.findall(r"distance_estimate\((.*?), params\)", body)
-    assert calls and all("SELECT(max_t, t, active)" in call for call in calls), calls
+    # where the estimate iterates, a lane whose shadow ray is blocked would
+    # otherwise evaluate where it stopped, at a surface, where the orbit
+    # iterates longest and keeps the loop going for the lanes still
+    # marching; without iterations the select would only cost
+    light = f"light directional {{ direction: (0, 0, -1), shadows: {shadows} }}"
+    for scene, sample in ((BULB, "SELECT(max_t, t, active)"), ("scene sphere() | plane(offset: -1)\n", "t")):
+        source = fractalc.loads(scene + light).kernel_source(lanes=8)
+        calls = re.findall(r"distance_estimate\((.*?), params\)", _function(source, function))
+        assert calls and all("shadow_sample_t(t, max_t, active)" in call for call in calls), calls
+        assert f"return {sample};" in _function(source, "shadow_sample_t")
 
 
 def test_distance_program_hoists_too():

@@ -2,17 +2,27 @@
 // than `max_t` (the light's distance, or MAX_DISTANCE for a directional
 // light). Rays of lanes that are not `active` are not marched.
 
+// Where a shadow ray samples the estimate: at t, or for a lane whose ray is
+// done, where an estimate that iterates (a fractal's, a formula's) costs
+// least: at the ray's end, max_t, outside the scene's bound. A blocked ray
+// stops at a surface, where the orbit iterates longest and would keep the
+// other lanes' loop going (bulb-640 2-3% on Intel's runtime and PoCL);
+// with no iterations the choice only costs (csg.frac 1.5%).
+real shadow_sample_t(real t, real max_t, mask active) {
+#if FEATURE_ITERATED_ESTIMATE
+    return SELECT(max_t, t, active);
+#else
+    return t;
+#endif
+}
+
 // Hard shadow: 0 where the ray hits a surface before the light, else 1.
 // Over-relaxed (Keinert et al. 2014, as `march` is): steps of 1.6 d while
 // successive unbounding spheres overlap; where they do not, the ray steps
 // back and goes on plainly. A shadow ray leaves a surface, where d grows
 // along it and plain steps creep: half of bulb-640's shadow evaluations
 // were within 20 thresholds of the start (1.3 and 2 saved less: 2
-// overshoots often, and falls back). A lane whose ray is done evaluates
-// the ray's end (max_t: outside the scene's bound, where an estimate costs
-// least) rather than where it stopped: a blocked ray stops at a surface,
-// where a fractal's orbit iterates longest and would keep the other lanes'
-// loop going (bulb-640 2-3%).
+// overshoots often, and falls back).
 real hard_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, mask active,
                  PARAMS_SPACE scalar *params) {
     real t = 2.0f * threshold;
@@ -20,7 +30,7 @@ real hard_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, mask ac
     real omega = 1.6f, previous = 0.0f, step = 0.0f;
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
         COUNT_EVALUATIONS(COUNT_SHADOWS, active, 1.0f);
-        real d = distance_estimate(v3_add(origin, v3_scale(to_light, SELECT(max_t, t, active))), params);
+        real d = distance_estimate(v3_add(origin, v3_scale(to_light, shadow_sample_t(t, max_t, active))), params);
         mask overshot = active & (omega > 1.0f) & (d + previous < step);
         t = SELECT(t, t - step, overshot);
         d = SELECT(d, previous, overshot);
@@ -51,7 +61,7 @@ real hard_shadow_through(vec3 origin, vec3 to_light, real max_t, real threshold,
     real visible = 1.0f;
     mask clear_of_surface = MASK_TRUE;
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
-        vec3 q = v3_add(origin, v3_scale(to_light, SELECT(max_t, t, active)));     // a finished lane: its ray's end, as above
+        vec3 q = v3_add(origin, v3_scale(to_light, shadow_sample_t(t, max_t, active)));
         COUNT_EVALUATIONS(COUNT_SHADOWS, active, 1.0f);
         real d = distance_estimate(q, params);
         mask entering = active & clear_of_surface & (d < threshold);
@@ -111,7 +121,7 @@ real soft_shadow(vec3 origin, vec3 to_light, real max_t, real threshold, real k,
     real omega = 1.6f, step = 0.0f;
     for (int i = 0; i < MAX_STEPS && ANY(active); i++) {
         COUNT_EVALUATIONS(COUNT_SHADOWS, active, 1.0f);
-        real d = distance_estimate(v3_add(origin, v3_scale(to_light, SELECT(max_t, t, active))), params);  // a finished lane: its ray's end
+        real d = distance_estimate(v3_add(origin, v3_scale(to_light, shadow_sample_t(t, max_t, active))), params);
         real ratio = d / t;
         visible = SELECT(visible, min(visible, k * ratio), active);
         mask overshot = active & (omega > 1.0f) & (d + d_last < step);
