@@ -229,6 +229,61 @@ def test_the_refined_rsqrt_is_within_an_ulp(vector, driver):
         assert ulps.max() < 1.5
 
 
+REDUCTIONS_KERNEL = """
+__kernel void reductions(__global const MASK_ELEMENT *lanes, __global int *out) {
+    int i = get_global_id(0);
+    mask m = LOAD_LANES(i, lanes);
+    out[2 * i] = ANY(m);
+    out[2 * i + 1] = ALL(m);
+}
+"""
+
+
+@pytest.mark.opencl
+@pytest.mark.parametrize("double", [False, True])
+def test_any_and_all_of_every_mask(double, driver):
+    # the prelude's ANY and ALL fold a mask's halves together (PoCL's any()
+    # tests the lanes a pair at a time, a branch each): every pattern of the
+    # driver's lanes, in float's masks (int) and double's (long)
+    import pyopencl as cl
+    from fractalc.stdlib import library
+    device = fractalc.loads("scene sphere()", device=driver).device
+    if double and not device.info.double:
+        pytest.skip("no double precision")
+    # every width up to the driver's (the lane probe reads ANY too: where it
+    # fails, a CPU driver falls back to one ray per work-item)
+    assert device.lanes > 1 or device.info.kind == "GPU"
+    for lanes in (2, 4, 8, 16):
+        if lanes > device.lanes:
+            break
+        source = "\n".join([f"#define LANES {lanes}", f"#define PRECISION_DOUBLE {int(double)}",
+                            "#define FAST_MATH 0", "#define REFINED_RSQRT 0", library().prelude,
+                            REDUCTIONS_KERNEL])
+        program = cl.Program(device.context, source).build()
+        patterns = np.arange(2 ** lanes)
+        masks = -((patterns[:, None] >> np.arange(lanes)) & 1).astype(np.int64 if double else np.int32)
+        out = np.empty(2 * len(patterns), np.int32)
+        flags = cl.mem_flags
+        mask_buffer = cl.Buffer(device.context, flags.READ_ONLY | flags.COPY_HOST_PTR, hostbuf=masks)
+        out_buffer = cl.Buffer(device.context, flags.WRITE_ONLY, out.nbytes)
+        program.reductions(device.queue, (len(patterns),), None, mask_buffer, out_buffer)
+        cl.enqueue_copy(device.queue, out, out_buffer)
+        assert np.array_equal(out[0::2] != 0, patterns != 0), lanes
+        assert np.array_equal(out[1::2] != 0, patterns == 2 ** lanes - 1), lanes
+
+
+def test_the_power_8_step_takes_its_root_and_its_reciprocal_side_by_side():
+    # rho and 1 / rho^2, each from rho^2 alone: a root and a division that
+    # wait for nothing else (1 / rho as rsqrt, which PoCL computes as a root
+    # and then a division, held both on the iteration's path: bulb-640 6%)
+    body = _function(fractalc.loads(BULB).kernel_source(lanes=8), "distance_estimate")
+    step = body[body.index("if (k"):body.index("} else {")]
+    assert "rsqrt(" not in step, step
+    roots = re.findall(r"\bsqrt\((r\d+)\)", step)
+    divided = re.findall(r"1\.0f / f?max\((r\d+),", step)
+    assert len(divided) == 1 and divided[0] in roots, step
+
+
 def test_the_refined_rsqrt_is_chosen_for_float_kernels_without_native_functions():
     scene = fractalc.loads(BULB)
     lowered = lower(scene.checked)
