@@ -63,6 +63,20 @@ def test_every_plane_is_finite(name):
         assert_finite_planes(rendered(name, precision))
 
 
+# Pixels that rounding decides, per 1000 (knife edges, below), where a
+# scene has more than the 2 of a shadow ray grazing an occluder: a camera a
+# hair from the Mandelbulb sees it at the float estimate's limit, where its
+# rounding turns the normal by a degree or more at a pixel in ten, and in a
+# crevice that moves the occlusion samples in or out of the solid. Measured
+# on 99x75 renders of the view and of 7 views 2e-5 away, Intel's runtime
+# and PoCL 3.1: 12 to 60 pixels of 7425 (0.16-0.81%) with the power-8 step
+# of d38c162, 12 to 59 with today's (whose float normals are nearer
+# double's: median 0.073 against 0.089 degrees); on the 33x25 view, 0 to
+# 4 of 825, so a limit of 2 in 1000 failed the older code in 1 (Intel)
+# and 3 (PoCL) of the 8 views.
+KNIFE_EDGES_PER_1000 = {"near_mandelbulb": 10}
+
+
 @pytest.mark.parametrize("name", sorted(p.stem for p in HERE.glob("*.frac")))
 def test_float_and_double_shade_alike(name):
     # at these scales rounding moves nothing visible: the same hits and the
@@ -71,13 +85,14 @@ def test_float_and_double_shade_alike(name):
     # decides (a knife edge: on mandelbox_scale_minus_1_5, moving the camera
     # by 0.002 put one such pixel of 1728 in the image in 1 to 3 of 8 views,
     # with or without cone marching); at most 2 pixels in 1000 may flip
+    # (KNIFE_EDGES_PER_1000 where a scene has more)
     float_, double = rendered(name), rendered(name, "double")
     error = compare(float_, double)
     assert error.hit_mismatch <= 0.01, error
     difference = linear_to_srgb(float_.rgba[..., :3].astype(np.float64)) - linear_to_srgb(
         double.rgba[..., :3].astype(np.float64))
     knife_edges = np.abs(difference).max(axis=-1) > 0.1
-    assert knife_edges.mean() <= 0.002, error
+    assert knife_edges.mean() <= KNIFE_EDGES_PER_1000.get(name, 2) / 1000, error
     assert np.sqrt(np.mean(difference[~knife_edges] ** 2)) < 0.005, error
 
 
