@@ -732,13 +732,13 @@ _IDENTIFIER = re.compile(r"\b[A-Za-z_]\w*\b")
 
 
 def _lean(roots: tuple, scene_ir: SceneIR) -> Hoisted:
-    """`roots` without the guards that cannot fire (fractalc/ranges.py) and
-    the loop carries they leave idle, their uniform values hoisted into
-    derived params (fractalc/hoist.py)."""
+    """`roots` without the guards that cannot fire (fractalc/ranges.py), the
+    range promises it read and the loop carries they leave idle, their
+    uniform values hoisted into derived params (fractalc/hoist.py)."""
     params = scene_ir.scene.params
     declared = {p.index: (-FLOAT_MAX if p.low is None else p.low, FLOAT_MAX if p.high is None else p.high)
                 for p in params}
-    return hoist(ir.without_idle_carries(ranges.simplify(roots, declared)), len(params))
+    return hoist(ir.without_idle_carries(ir.without_promises(ranges.simplify(roots, declared))), len(params))
 
 
 def _derived_kernel(derived: tuple[ir.Expr, ...], first: int) -> str:

@@ -608,6 +608,14 @@ def transform(roots: tuple, rewrite: Callable) -> tuple:
     return tuple(made[r] for r in roots)
 
 
+def without_promises(roots: tuple) -> tuple:
+    """`roots` with each `within(x, low, high)` as x: once the range analysis
+    has read the promise, its bounds would only be computed for nothing."""
+    def rewrite(node, rebuilt):
+        return rebuilt.args[0] if isinstance(rebuilt, Op) and rebuilt.op == "within" else rebuilt
+    return transform(roots, rewrite)
+
+
 def without_idle_carries(roots: tuple) -> tuple:
     """`roots` with every loop's carried values that never change (the next
     value is the carried one itself, or the constant it starts as) replaced

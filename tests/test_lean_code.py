@@ -48,6 +48,19 @@ def test_param_only_values_leave_the_estimate(lanes):
 
 
 @pytest.mark.parametrize("lanes", [1, 8])
+def test_the_estimate_computes_no_value_it_does_not_read(lanes):
+    # the power-8 step promises |z^8| <= 2 r^8 + 1 to the range analysis
+    # (`within`): the promise's bounds are read there, not computed
+    source = fractalc.loads(BULB).kernel_source(lanes=lanes)
+    for name in ["distance_estimate"] + ["uniform_distance_estimate"] * (lanes > 1):
+        body = _function(source, name)
+        temporaries = re.findall(r"\b(?:real|scalar|mask|lane_int|int) ([a-z]\d+) = ", body)
+        assert temporaries, body
+        for temporary in temporaries:
+            assert len(re.findall(rf"\b{temporary}\b", body)) > 1, (name, temporary, body)
+
+
+@pytest.mark.parametrize("lanes", [1, 8])
 def test_the_scene_bound_and_the_shading_compute_no_power(lanes):
     # the bound radius pow(2, 1 / (power - 1)) is the estimate's derived
     # param; Blinn-Phong's highlight is exp2 of a log2 (PoCL's pow costs

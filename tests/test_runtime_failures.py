@@ -24,8 +24,11 @@ def _fractalc(*args, cwd, env=None):
 @pytest.mark.parametrize("command", [["devices"], ["render", "scene.frac", "-o", "out.png"]])
 def test_no_opencl_platform_says_how_to_install_pocl(tmp_path, command):
     (tmp_path / "scene.frac").write_text(SCENE)
+    # a cache of its own: a process that another test killed while it used
+    # the shared one would add a line here (drivers.py clears the cache then)
     result = _fractalc(*command, cwd=tmp_path, env={"OCL_ICD_VENDORS": str(tmp_path / "no-vendors"),
-                                                    "FRACTALC_BUNDLED_DRIVERS": "0"})
+                                                    "FRACTALC_BUNDLED_DRIVERS": "0",
+                                                    "FRACTALC_CACHE_DIR": str(tmp_path / "cache")})
     assert result.returncode == 1
     assert "pocl" in result.stderr.lower() and "Traceback" not in result.stderr
     assert "pip install intel-opencl-rt intel-cmplr-lib-rt" in result.stderr
