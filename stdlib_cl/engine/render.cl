@@ -79,21 +79,21 @@ __kernel VECTOR_LANES_HINT void render(__global float *out, PARAMS_SPACE scalar 
     // glow, fog and background colours are bounded only below: their sums
     // may pass float's range (inf, or NaN where one meets 0); pixels stay finite
     color = v3(fmin(color.x, (real)FLT_MAX), fmin(color.y, (real)FLT_MAX), fmin(color.z, (real)FLT_MAX));
-    __global float *block = out + (block_y * pitch + block_x) * CHANNELS;
+    block_pixels pixels;
     real depth = SELECT((real)INFINITY, centre.t, centre.hit);
-    store_channel(TO_FLOAT(color.x), CHANNEL_R, block, pitch);
-    store_channel(TO_FLOAT(color.y), CHANNEL_G, block, pitch);
-    store_channel(TO_FLOAT(color.z), CHANNEL_B, block, pitch);
-    store_channel(TO_FLOAT(coverage), CHANNEL_A, block, pitch);
-    store_channel(TO_FLOAT(depth), CHANNEL_Z, block, pitch);
-    store_vec3(normal, CHANNEL_N_X, block, pitch);
-    store_channel(TO_FLOAT(centre.steps), CHANNEL_STEPS, block, pitch);
+    store_channel(TO_FLOAT(color.x), CHANNEL_R, &pixels);
+    store_channel(TO_FLOAT(color.y), CHANNEL_G, &pixels);
+    store_channel(TO_FLOAT(color.z), CHANNEL_B, &pixels);
+    store_channel(TO_FLOAT(coverage), CHANNEL_A, &pixels);
+    store_channel(TO_FLOAT(depth), CHANNEL_Z, &pixels);
+    store_vec3(normal, CHANNEL_N_X, &pixels);
+    store_channel(TO_FLOAT(centre.steps), CHANNEL_STEPS, &pixels);
 
     // The passes asked for, of the pixel-centre ray like the AOVs above
     // (0 where it missed).
 #if FEATURE_PASS_P
     vec3 hit_point = v3_select(v3((real)0.0f, 0.0f, 0.0f), v3_add(origin, v3_scale(dir, centre.t)), centre.hit);
-    store_vec3(hit_point, CHANNEL_P_X, block, pitch);
+    store_vec3(hit_point, CHANNEL_P_X, &pixels);
 #endif
 #if FEATURE_SHADING_PASSES
     shading_passes passes;
@@ -107,30 +107,30 @@ __kernel VECTOR_LANES_HINT void render(__global float *out, PARAMS_SPACE scalar 
                      centre.steps, centre.hit, params, &passes);
 #endif
 #if FEATURE_PASS_DIFFUSE
-    store_vec3(v3_select(v3((real)0.0f, 0.0f, 0.0f), passes.diffuse, centre.hit), CHANNEL_DIFFUSE_R, block, pitch);
+    store_vec3(v3_select(v3((real)0.0f, 0.0f, 0.0f), passes.diffuse, centre.hit), CHANNEL_DIFFUSE_R, &pixels);
 #endif
 #if FEATURE_PASS_SPECULAR
-    store_vec3(v3_select(v3((real)0.0f, 0.0f, 0.0f), passes.specular, centre.hit), CHANNEL_SPECULAR_R, block, pitch);
+    store_vec3(v3_select(v3((real)0.0f, 0.0f, 0.0f), passes.specular, centre.hit), CHANNEL_SPECULAR_R, &pixels);
 #endif
 #if FEATURE_PASS_AO
-    store_channel(TO_FLOAT(SELECT((real)0.0f, passes.occlusion, centre.hit)), CHANNEL_AO, block, pitch);
+    store_channel(TO_FLOAT(SELECT((real)0.0f, passes.occlusion, centre.hit)), CHANNEL_AO, &pixels);
 #endif
 #if FEATURE_PASS_SHADOW
-    store_channel(TO_FLOAT(SELECT((real)0.0f, passes.shadow, centre.hit)), CHANNEL_SHADOW, block, pitch);
+    store_channel(TO_FLOAT(SELECT((real)0.0f, passes.shadow, centre.hit)), CHANNEL_SHADOW, &pixels);
 #endif
 #if FEATURE_PASS_GLOW
     vec3 glow = v3((real)0.0f, 0.0f, 0.0f);   // none in a scene without glow
 #if FEATURE_GLOW
     glow = glow_color(centre);
 #endif
-    store_vec3(glow, CHANNEL_GLOW_R, block, pitch);
+    store_vec3(glow, CHANNEL_GLOW_R, &pixels);
 #endif
 #if FEATURE_PASS_MATERIAL
     // the index of the hit's material (lower.py's Surface.material); -1 where the ray missed
     real material = (real)-1.0f;
     if (ANY(centre.hit))
         material = SELECT(material, surface_at(v3_add(origin, v3_scale(dir, centre.t)), params).material, centre.hit);
-    store_channel(TO_FLOAT(material), CHANNEL_MATERIAL, block, pitch);
+    store_channel(TO_FLOAT(material), CHANNEL_MATERIAL, &pixels);
 #endif
 #if FEATURE_PASS_ALBEDO
     // the hit's material colour (a denoiser's guide); 0 where the ray missed
@@ -139,6 +139,7 @@ __kernel VECTOR_LANES_HINT void render(__global float *out, PARAMS_SPACE scalar 
         surface s = surface_at(v3_add(origin, v3_scale(dir, centre.t)), params);
         albedo = v3_select(albedo, v3(s.red, s.green, s.blue), centre.hit);
     }
-    store_vec3(albedo, CHANNEL_ALBEDO_R, block, pitch);
+    store_vec3(albedo, CHANNEL_ALBEDO_R, &pixels);
 #endif
+    write_block(&pixels, out + (block_y * pitch + block_x) * CHANNELS, pitch);
 }
