@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import secrets
+import signal
 import stat
 from contextlib import contextmanager
 
@@ -187,6 +188,26 @@ def output_problem(path: str, folders_made: bool = False) -> str | None:
     return None
 
 
+# The signals that stop a command (Ctrl-C, the CLI's SIGTERM and SIGHUP)
+_STOPPING_SIGNALS = {getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n)}
+
+
+@contextmanager
+def _signals_held():
+    """The stopping signals held until the block ends, then delivered: one
+    that stopped the image writer between its opening and closing made
+    libpng print "No IDATs written into file" after fractalc's own message.
+    (Where threads' signal masks are unknown, nothing is held.)"""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, _STOPPING_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
 def write(path: str, planes: dict[str, np.ndarray], metadata: dict[str, str], half: bool = False,
           compression: str = "zip", bits: int = 8) -> None:
     """Write the render's planes (channel name -> (H, W) array, in channel
@@ -230,12 +251,13 @@ def write(path: str, planes: dict[str, np.ndarray], metadata: dict[str, str], ha
     exposure, curve = float(metadata.get("render.exposure", 0.0)), metadata.get("render.tonemap", DEFAULT_TONE_CURVE)
     pixels = _interleaved(planes) if exr else _srgb_rgba(planes, bits, transparent, exposure, curve)
     with replacing(path) as temporary:
-        output = oiio.ImageOutput.create(temporary)
-        if output is None or not output.open(temporary, spec):
-            raise RenderError(f"cannot write {path}: {oiio.geterror() or 'unsupported format'}")
-        try:
-            written = output.write_image(pixels)
-        finally:
-            closed = output.close()
+        with _signals_held():     # a stop waits for the file to be whole, then removes it
+            output = oiio.ImageOutput.create(temporary)
+            if output is None or not output.open(temporary, spec):
+                raise RenderError(f"cannot write {path}: {oiio.geterror() or 'unsupported format'}")
+            try:
+                written = output.write_image(pixels)
+            finally:
+                closed = output.close()
         if not (written and closed):
             raise RenderError(f"cannot write {path}: {output.geterror()}")

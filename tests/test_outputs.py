@@ -168,6 +168,45 @@ def test_sigterm_while_writing_leaves_no_temporary_file(work):
     assert (work / "out.exr").read_bytes() == b"the previous image"
 
 
+@POSIX_ONLY
+def test_ctrl_c_in_the_image_writer_waits_for_a_whole_file_then_removes_it(tmp_path, monkeypatch, capfd):
+    # Ctrl-C that arrived between the PNG writer's opening and closing made
+    # libpng print "No IDATs written into file" after fractalc's message
+    import OpenImageIO
+    from fractalc import write
+    real = OpenImageIO.ImageOutput
+
+    class Interrupted:
+        """The real image writer, Ctrl-C arriving as it starts writing."""
+        @staticmethod
+        def create(name):
+            output = real.create(name)
+
+            class Output:
+                def open(self, *args):
+                    return output.open(*args)
+
+                def write_image(self, pixels):
+                    signal.raise_signal(signal.SIGINT)
+                    return output.write_image(pixels)
+
+                def close(self):
+                    return output.close()
+
+                def geterror(self):
+                    return output.geterror()
+            return Output()
+
+    monkeypatch.setattr(OpenImageIO, "ImageOutput", Interrupted)
+    (tmp_path / "out.png").write_bytes(b"the previous image")
+    planes = {name: np.zeros((24, 32), np.float32) for name in EXR_CHANNELS}
+    with pytest.raises(KeyboardInterrupt):
+        write.write(str(tmp_path / "out.png"), planes, {})
+    assert "libpng" not in capfd.readouterr().err
+    assert (tmp_path / "out.png").read_bytes() == b"the previous image"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png"]
+
+
 @pytest.mark.opencl
 @POSIX_ONLY
 def test_sighup_while_rendering_frames_leaves_whole_frames_only(work):
