@@ -10,7 +10,8 @@ names) where the format has room for it (EXR header, PNG text).
 
 The file appears atomically: it is written beside its destination under a
 temporary name, then renamed; the temporary file is removed whatever stops the write (an error, Ctrl-C, or
-the CLI's SIGTERM and SIGHUP handlers). Memory: an EXR is written from the
+the CLI's SIGTERM and SIGHUP handlers; a signal that comes while the image writer has the file open is held
+until the file is whole, so that no library reports a half-written one). Memory: an EXR is written from the
 render's own array (its channels are already interleaved in EXR order),
 and a PNG is converted in strips of rows into its integer pixels, so that a
 write needs at most a ninth of the float image beyond the render's array.
