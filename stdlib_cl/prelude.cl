@@ -51,17 +51,24 @@ typedef CONCAT(uint, LANES) lane_uint;
 // PoCL's any() tests the lanes' sign bits a pair at a time, a branch each,
 // on the iteration's path (bulb-640 6% faster there, 1% on Intel's
 // runtime). A set lane is -1, so the folded lane is negative.
-#define FOLDS_OF(element) \
-    __attribute__((overloadable)) int any_lane(CONCAT(element, 2) m) { return (m.x | m.y) < 0; } \
-    __attribute__((overloadable)) int any_lane(CONCAT(element, 4) m) { return any_lane(m.lo | m.hi); } \
-    __attribute__((overloadable)) int any_lane(CONCAT(element, 8) m) { return any_lane(m.lo | m.hi); } \
-    __attribute__((overloadable)) int any_lane(CONCAT(element, 16) m) { return any_lane(m.lo | m.hi); } \
-    __attribute__((overloadable)) int all_lanes(CONCAT(element, 2) m) { return (m.x & m.y) < 0; } \
-    __attribute__((overloadable)) int all_lanes(CONCAT(element, 4) m) { return all_lanes(m.lo & m.hi); } \
-    __attribute__((overloadable)) int all_lanes(CONCAT(element, 8) m) { return all_lanes(m.lo & m.hi); } \
-    __attribute__((overloadable)) int all_lanes(CONCAT(element, 16) m) { return all_lanes(m.lo & m.hi); }
-FOLDS_OF(MASK_ELEMENT)
-#undef FOLDS_OF
+// Only the widths up to the kernel's: a wider vector's overload would be
+// dead code, and a 16-lane long argument on a CPU without AVX-512 makes
+// PoCL warn of its calling convention.
+#define FOLD_OF(width) \
+    __attribute__((overloadable)) int any_lane(CONCAT(MASK_ELEMENT, width) m) { return any_lane(m.lo | m.hi); } \
+    __attribute__((overloadable)) int all_lanes(CONCAT(MASK_ELEMENT, width) m) { return all_lanes(m.lo & m.hi); }
+__attribute__((overloadable)) int any_lane(CONCAT(MASK_ELEMENT, 2) m) { return (m.x | m.y) < 0; }
+__attribute__((overloadable)) int all_lanes(CONCAT(MASK_ELEMENT, 2) m) { return (m.x & m.y) < 0; }
+#if LANES >= 4
+FOLD_OF(4)
+#endif
+#if LANES >= 8
+FOLD_OF(8)
+#endif
+#if LANES >= 16
+FOLD_OF(16)
+#endif
+#undef FOLD_OF
 #define ANY(m) any_lane(m)
 #define ALL(m) all_lanes(m)
 #define SELECT(if_false, if_true, m) select((if_false), (if_true), (m))
