@@ -656,7 +656,7 @@ def emit_distance(scene_ir: SceneIR, target: Target = Target()) -> str:
         _library_text(lib.closure(_calls(hoisted.roots[0]))),
         "// ---- the scene " + "-" * 60,
         function_source(hoisted.roots[0], _scene_template("distance_signature")),
-        _scalar_copies(lib, (), "", hoisted.derived, len(scene.params)),
+        _derived_params(lib, hoisted.derived, len(scene.params)),
         lib.distance_kernel,
     ]
     source = "\n\n".join(p.strip("\n") for p in parts if p) + "\n"
@@ -708,8 +708,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
         "// ---- the scene " + "-" * 60,
         function_source(scene_ir.distance, _scene_template("distance_signature"), counting=True)
         if target.count else distance,
-        _scalar_copies(lib, scene_functions if on["CONE"] else (), distance if on["CONE"] else "",
-                       hoisted.derived, len(scene.params)),
+        _derived_params(lib, hoisted.derived, len(scene.params)),
         _surface_function(scene_ir), bound,
         resolve_features(_library_text(shading_functions), on),
         _normal_functions(scene.render.normals),
@@ -744,27 +743,25 @@ def _lean(roots: tuple, scene_ir: SceneIR) -> Hoisted:
 def _derived_kernel(derived: tuple[ir.Expr, ...], first: int) -> str:
     """The kernel `derived_params`: the hoisted values (fractalc/hoist.py)
     into the params buffer's slots from `first` on, written with the
-    per-ray names that `_scalar_copies` renames."""
+    per-ray names that `_derived_params` renames."""
     writer = _FunctionWriter(ir.Vec(derived))
     writer.block(writer.root, "    ")
     stores = [_scene_template("derived_store", slot=first + i, value=writer.text[v]) for i, v in enumerate(derived)]
     return _scene_template("derived_params", lines=_body([*writer.lines, *stores]))
 
 
-def _scalar_copies(lib, functions, distance: str, derived: tuple[ir.Expr, ...], first: int) -> str:
-    """The derived params' kernel and, for cone marching, the scene's
-    distance estimate (`uniform_distance_estimate`: one point shared by
-    all the rays of a work-item), with the vec3 helpers and the library
-    functions they call, in scalar types. The same text with the per-ray
-    types renamed: the library is written to compile with one ray per
-    work-item, which is this."""
-    called = {f.name for f in functions} | {name for e in derived for name in _calls(e)}
+def _derived_params(lib, derived: tuple[ir.Expr, ...], first: int) -> str:
+    """The derived params' kernel, with the vec3 helpers and the library
+    functions it calls, in scalar types (`uvec3`, `uniform_v3`, ...: cone
+    marching's axes use them too). The same text with the per-ray types
+    renamed: the library is written to compile with one ray per work-item,
+    which is this."""
+    called = {name for e in derived for name in _calls(e)}
     vectors = lib.prelude[lib.prelude.index("typedef struct { real x, y, z; } vec3;"):]
-    text = "\n\n".join([vectors, *(f.source for f in lib.closure(sorted(called))), distance,
-                         _derived_kernel(derived, first)])
+    text = "\n\n".join([vectors, *(f.source for f in lib.closure(sorted(called))), _derived_kernel(derived, first)])
     renames = {**_UNIFORM_NAMES, **{name: f"uniform_{name}" for name in _FUNCTION_NAME.findall(text)}}
     renamed = _IDENTIFIER.sub(lambda m: renames.get(m.group(0), m.group(0)), text)
-    return _scene_template("scalar_copies", text=renamed)
+    return _scene_template("in_scalar_types", text=renamed)
 
 
 def _normal_functions(method: str) -> str:

@@ -102,8 +102,8 @@ ${lines}}
 //@ derived_store
     params[$slot] = (scalar)$value;
 
-//@ scalar_copies  the scalar copies' block: `$text` in scalar types
-// In scalar types: the derived params, and the distance estimate at one point for a work-item's rays (cone marching)
+//@ in_scalar_types  the derived params' block: `$text` in scalar types
+// In scalar types: the derived params, and the vectors of one point (cone marching's axes)
 #define UNIFORM_SELECT(if_false, if_true, m) ((m) ? (if_true) : (if_false))
 ${text}
 

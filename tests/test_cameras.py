@@ -222,7 +222,13 @@ def test_a_path_keyframe_does_not_take_the_projection():
 @pytest.mark.opencl
 @pytest.mark.parametrize("build", [{"lanes": 1}, {"precision": "double"}])
 def test_every_camera_renders_alike_on_one_lane_and_in_double(build):
-    text = SCENE.replace("samples: 16", "samples: 4") + "\nlight directional { direction: (-1, 1, -1) }"
+    # a hit threshold of 1e-4, not the scene's 1e-5: normals by differences
+    # that small take the float estimate's last bits (a thousandth of the
+    # colour, which Intel's runtime rounds differently in a kernel of 16
+    # lanes and one of 1: 1.6-2.8e-3 over four nearby params), where this
+    # test compares the cameras' rays (within 2.5e-4 with 1e-4)
+    text = (SCENE.replace("samples: 16", "samples: 4").replace("epsilon: 1e-5", "epsilon: 1e-4")
+            + "\nlight directional { direction: (-1, 1, -1) }")
     cameras = [eye_camera(0.0, projection="fisheye", fisheye_fov=250, stereo="side_by_side", eye_separation=0.3),
                eye_camera(0.0, projection="equirectangular", stereo="top_bottom", eye_separation=0.3),
                eye_camera(0.0, fov=70, stereo="side_by_side", eye_separation=0.3, aperture=0.1)]
@@ -232,4 +238,4 @@ def test_every_camera_renders_alike_on_one_lane_and_in_double(build):
             scene.set_params({"x": 0.3, "y": -1.0, "z": 0.4, "r": 0.6})
             images.append(scene.render(camera=camera, width=48, height=24).rgba)
         assert images[0][..., 3].sum() > 4
-        assert np.abs(images[0] - images[1]).max() < 2e-3, camera
+        assert np.abs(images[0] - images[1]).max() < 1e-3, camera

@@ -1,26 +1,26 @@
-"""Cone marching (render key `cone_marching`, on by default): a work-item's
-packet of camera rays is marched as one cone first, its distance evaluated
-at one point with the scene's estimate in scalar types
-(`uniform_distance_estimate`, emit._uniform_copy). The images it leaves are
-tested on the hard cases (tests/hard/test_hard.py); here: the scalar copy
-computes what the per-ray estimate does, it is in a kernel only where it is
-used, and it saves evaluations."""
+"""Cone marching (render key `cone_marching`, on by default): a
+work-item's packet of camera rays is marched as one cone first, the cones
+of up to LANES packets (neighbouring blocks' centre rays, or one block's
+samples) side by side, a packet a lane of one vector evaluation
+(stdlib_cl/engine/cone.cl). The images it leaves are tested on the hard
+cases (tests/hard/test_hard.py); here: a packet's cone does not depend on
+the packets marched beside it, it is in a kernel only where it is used,
+and it saves evaluations."""
 from __future__ import annotations
 
 from dataclasses import replace
 
 import numpy as np
-import pyopencl as cl
 import pytest
 
 import fractalc
+from fractalc import run
 from fractalc.count import count
-from fractalc.emit import Target, double_literals, emit
+from fractalc.emit import Target, emit
 from fractalc.lower import lower
-from fractalc.run import kernel_params
 
 # CSG, a transform, a built-in fractal with a parameter and a hybrid of
-# library formulas: every kind of code the scalar copy is made from
+# library formulas
 SCENE = """
 param power = 7 in [2, 16]
 let blend = union(sphere(0.5).translate((2.2, 0, 0)), box(0.4).twist(0.8).translate((2.2, 0.4, 0)), smooth: 0.2)
@@ -30,13 +30,13 @@ camera { position: (0, -7, 3), target: (0.5, 0.5, 0), fov: 50 }
 render { width: 48, height: 36, dither: 0 }
 """
 
-UNIFORM_KERNEL = """
-__kernel VECTOR_LANES_HINT void uniform_at_points(__global const scalar *points, __global scalar *distances,
-                                __constant scalar *params, int count) {
-    int i = get_global_id(0);
-    distances[i] = uniform_distance_estimate(uniform_v3(points[i], points[i + count], points[i + 2 * count]),
-                                             params);
-}
+
+# a scene whose estimates are distance bounds (the hybrid above overshoots
+# without its step factor): the rays hit where they would without the cone
+BOUNDED = """
+scene union(mandelbulb(), sphere(0.6).translate((1.8, 0, 0)))
+camera { position: (0.4, -3.6, 1.2), target: (0.4, 0, 0), fov: 45 }
+render { width: 48, height: 36, dither: 0, cone_marching: CONE }
 """
 
 
@@ -47,49 +47,44 @@ def kernel_source(scene, lanes: int, double: bool = False, **render_keys) -> str
 
 @pytest.mark.opencl
 @pytest.mark.parametrize("precision", ["float", "double"])
-def test_the_scalar_copy_of_the_estimate_agrees_with_the_per_ray_one(precision):
-    scene = fractalc.loads(SCENE, precision=precision, lanes=8)
-    double = precision == "double"
-    source = kernel_source(scene, 8, double) + (double_literals(UNIFORM_KERNEL) if double else UNIFORM_KERNEL)
-    program = cl.Program(scene.device.context, source).build()
-    rng = np.random.default_rng(7)
-    points = np.concatenate([rng.uniform(-3, 3, (4000, 3)), rng.normal(0, 0.7, (4000, 3)),
-                             [[0, 0, 0], [0, 2.4, 0], [2.2, 0, 0], [1e6, 0, 0], [0, 0, 1e-20]]])
-    dtype = np.float64 if double else np.float32
-    planar = np.ascontiguousarray(points.T, dtype=dtype)
-    flags = cl.mem_flags
-    queue = scene.device.queue
-    points_buffer = cl.Buffer(scene.device.context, flags.READ_ONLY | flags.COPY_HOST_PTR, hostbuf=planar)
-    params_buffer = kernel_params(program, scene.device, [7.0], double)
-    out = np.empty(len(points), dtype=dtype)
-    out_buffer = cl.Buffer(scene.device.context, flags.WRITE_ONLY, out.nbytes)
-    cl.Kernel(program, "uniform_at_points")(queue, (len(points),), None, points_buffer, out_buffer,
-                                            params_buffer, np.int32(len(points)))
-    cl.enqueue_copy(queue, out, out_buffer)
-    per_ray = scene.distance(points)
-    assert np.isfinite(out).all()
-    # scalar and vector maths libraries may round differently in the last place
-    tolerance = 1e-12 if double else 1e-5
-    assert np.allclose(out, per_ray, rtol=tolerance, atol=tolerance), np.abs(out - per_ray).max()
+@pytest.mark.parametrize("samples", [1, 20])
+def test_a_packet_s_cone_does_not_depend_on_the_packets_beside_it(precision, samples, monkeypatch):
+    # a launch one block wide marches each block's cone alone, a whole row
+    # marches 12 side by side (a block's 20 samples: 16, then 4, either way)
+    scene = fractalc.loads(BOUNDED.replace("CONE", "on"), precision=precision, lanes=16)
+    together = scene.render(samples=samples, progress=False)
+    monkeypatch.setattr(run, "TILE_WIDTH", 4)
+    alone = scene.render(samples=samples, progress=False)
+    assert np.isfinite(together.rgba).all() and together.rgba[..., 3].mean() > 0.2
+    np.testing.assert_array_equal(alone.rgba, together.rgba)
+    np.testing.assert_array_equal(alone.steps, together.steps)
 
 
-def test_the_scalar_copy_is_in_a_kernel_only_where_the_cone_is_marched():
+@pytest.mark.opencl
+def test_the_cones_of_a_block_s_samples_leave_the_hits_of_plain_marching():
+    # 20 samples: cones side by side in a batch of 16 and one of 4
+    scenes = {cone: fractalc.loads(BOUNDED.replace("CONE", cone), lanes=16) for cone in ("on", "off")}
+    images = {cone: scenes[cone].render(samples=20, progress=False) for cone in scenes}
+    coverage = {cone: images[cone].rgba[..., 3] for cone in images}
+    # a pixel's coverage is its 20 samples' hits: a cone that let rays pass
+    # a surface would lower it by 1/20 a ray; a cone starts its rays a
+    # little apart from plain marching's, so a grazing ray may hit or miss
+    # (here 36 pixels of 1728 by one sample, 8 by two)
+    assert 0.2 < coverage["on"].mean() < 0.8
+    assert abs(coverage["on"].mean() - coverage["off"].mean()) < 0.002
+    assert (np.abs(coverage["on"] - coverage["off"]) > 0.075).mean() < 0.01
+
+
+def test_the_cone_is_in_a_kernel_only_where_it_is_marched():
     scene = fractalc.loads(SCENE)
-    assert "uniform_distance_estimate" in kernel_source(scene, 16)
-    assert "uniform_distance_estimate" not in kernel_source(scene, 1), "one ray per work-item: no packet"
-    assert "uniform_distance_estimate" not in kernel_source(scene, 16, cone_marching="off")
+    assert "march_cones" in kernel_source(scene, 16)
+    # the cones evaluate the scene's own estimate: no copy of it in scalar types
+    assert "uniform_distance_estimate" not in kernel_source(scene, 16)
+    assert "march_cones" not in kernel_source(scene, 1), "one ray per work-item: no packet"
+    assert "march_cones" not in kernel_source(scene, 16, cone_marching="off")
     # glow reads each ray's closest approach, which the cone would skip
     glowing = fractalc.loads(SCENE.replace("dither: 0", "dither: 0, glow: { strength: 0.5, radius: 0.1 }"))
-    assert "uniform_distance_estimate" not in kernel_source(glowing, 16)
-
-
-# a scene whose estimates are distance bounds (the hybrid above overshoots
-# without its step factor): the rays hit where they would without the cone
-BOUNDED = """
-scene union(mandelbulb(), sphere(0.6).translate((1.8, 0, 0)))
-camera { position: (0.4, -3.6, 1.2), target: (0.4, 0, 0), fov: 45 }
-render { width: 48, height: 36, dither: 0, cone_marching: CONE }
-"""
+    assert "march_cones" not in kernel_source(glowing, 16)
 
 
 @pytest.mark.opencl

@@ -32,16 +32,13 @@ def _function(source: str, name: str) -> str:
 @pytest.mark.parametrize("lanes", [1, 8])
 def test_param_only_values_leave_the_estimate(lanes):
     source = fractalc.loads(BULB).kernel_source(lanes=lanes)
-    # cone marching's copy of the estimate, on vector lanes
-    estimates = ["distance_estimate"] + ["uniform_distance_estimate"] * (lanes > 1)
     # the same scene with the angle written in: its rotation's sine and cosine are constants
     folded = fractalc.loads(BULB.replace("angle * 2", "60")).kernel_source(lanes=lanes)
-    for name in estimates:
-        body = _function(source, name)
-        # the bound radius pow(2, 1 / (power - 1)) and the rotation's trigonometry
-        assert not re.search(r"\b(pow|\w*bound_radius)\(", body), (name, body)
-        trigonometry = re.compile(r"\b(sin|cos)\(")
-        assert len(trigonometry.findall(body)) == len(trigonometry.findall(_function(folded, name)))
+    body = _function(source, "distance_estimate")
+    # the bound radius pow(2, 1 / (power - 1)) and the rotation's trigonometry
+    assert not re.search(r"\b(pow|\w*bound_radius)\(", body), body
+    trigonometry = re.compile(r"\b(sin|cos)\(")
+    assert len(trigonometry.findall(body)) == len(trigonometry.findall(_function(folded, "distance_estimate")))
     kernel = _function(source, "__kernel void derived_params")
     assert re.search(r"\b\w*mandelbulb_bound_radius\(", kernel)
     assert re.search(r"\b(sin|cos)\(", kernel)
@@ -51,13 +48,11 @@ def test_param_only_values_leave_the_estimate(lanes):
 def test_the_estimate_computes_no_value_it_does_not_read(lanes):
     # the power-8 step promises |z^8| <= 2 r^8 + 1 to the range analysis
     # (`within`): the promise's bounds are read there, not computed
-    source = fractalc.loads(BULB).kernel_source(lanes=lanes)
-    for name in ["distance_estimate"] + ["uniform_distance_estimate"] * (lanes > 1):
-        body = _function(source, name)
-        temporaries = re.findall(r"\b(?:real|scalar|mask|lane_int|int) ([a-z]\d+) = ", body)
-        assert temporaries, body
-        for temporary in temporaries:
-            assert len(re.findall(rf"\b{temporary}\b", body)) > 1, (name, temporary, body)
+    body = _function(fractalc.loads(BULB).kernel_source(lanes=lanes), "distance_estimate")
+    temporaries = re.findall(r"\b(?:real|scalar|mask|lane_int|int) ([a-z]\d+) = ", body)
+    assert temporaries, body
+    for temporary in temporaries:
+        assert len(re.findall(rf"\b{temporary}\b", body)) > 1, (temporary, body)
 
 
 @pytest.mark.parametrize("lanes", [1, 8])

@@ -1,17 +1,43 @@
-// Renders one tile. Work-item (gx, gy) covers the block of LANES_X x LANES_Y
-// pixels whose top-left pixel is (x0 + gx * LANES_X, y0 + gy * LANES_Y)
-// (compact blocks keep a work-item's rays alike, so its lanes diverge less
-// than a row of LANES would). `out`: the whole image, whatever the tile:
-// rows of `pitch` pixels of CHANNELS floats (R G B A Z N.x N.y N.z steps,
-// then the passes asked for),
-// pixel (x, y) at (y * pitch + x) * CHANNELS; pitch >= width and its row
-// count >= height are multiples of LANES_X and LANES_Y (blocks past the
-// image's edge write there).
-__kernel VECTOR_LANES_HINT void render(__global float *out, PARAMS_SPACE scalar *params,
-                     __constant scalar *camera, int width, int height,
-                     int x0, int y0, int pitch, int samples, uint seed) {
-    int gx = get_global_id(0), gy = get_global_id(1);
-    int block_x = x0 + gx * LANES_X, block_y = y0 + gy * LANES_Y;
+// The camera's rays through the centres of the pixels of the block whose
+// top-left pixel is (block_x, block_y); `active`: those inside the image
+// and seen.
+vec3 block_centre_rays(__constant scalar *camera, int width, int height, int block_x, int block_y,
+                       vec3 *origin, mask *active) {
+    real px = (real)block_x + LANE_X;
+    real py = (real)block_y + LANE_Y;
+    mask seen;       // not outside a fisheye's 360 degrees
+    vec3 dir = pixel_ray(camera, width, height, px + 0.5f, py + 0.5f, origin, &seen);
+    *active = (px < (real)width) & (py < (real)height) & seen;
+    return dir;
+}
+
+// Sample `s` of `samples` through the block's pixels (px, py: their
+// top-left corners), stratified: a columns x rows array of cells covering
+// the pixel, one jittered sample per cell (square counts fill every cell).
+// `key`: the sample's hash, whose bits its random numbers are.
+vec3 sample_ray(__constant scalar *camera, int width, int height, real px, real py, lane_uint pixel_id, int s,
+                int samples, uint seed, vec3 *origin, mask *seen, lane_uint *key) {
+    int columns = (int)ceil(sqrt((float)samples));
+    int rows = (samples + columns - 1) / columns;
+    *key = hash_lanes(pixel_id * (uint)samples + (uint)s) ^ seed;
+    real jx = ((real)(s % columns) + unit_random(*key)) / (scalar)columns;
+    real jy = ((real)(s / columns) + unit_random(*key ^ 0x9e3779b9u)) / (scalar)rows;
+    vec3 dir = pixel_ray(camera, width, height, px + jx, py + jy, origin, seen);
+#if FEATURE_DEPTH_OF_FIELD
+    lens_sample(camera, unit_random(*key ^ 0x85ebca6bu), unit_random(*key ^ 0xc2b2ae35u), origin, &dir);
+#endif
+    return dir;
+}
+
+// One block's pixels: its camera rays (the centre's, and the samples'),
+// their colour, the channels and the passes; with cone marching, the
+// centre's rays are packet `packet` of `cones`.
+void render_block(__global float *out, PARAMS_SPACE scalar *params, __constant scalar *camera, int width,
+                  int height, int pitch, int samples, uint seed, int block_x, int block_y
+#if FEATURE_CONE
+                  , const cone_packets *cones, int packet
+#endif
+                  ) {
     real px = (real)block_x + LANE_X;
     real py = (real)block_y + LANE_Y;
     mask inside = (px < (real)width) & (py < (real)height);
@@ -25,10 +51,14 @@ __kernel VECTOR_LANES_HINT void render(__global float *out, PARAMS_SPACE scalar 
 
     // The camera's ray through the pixel centre gives the AOVs.
     vec3 origin;
-    mask seen;       // not outside a fisheye's 360 degrees
-    vec3 dir = pixel_ray(camera, width, height, px + 0.5f, py + 0.5f, &origin, &seen);
+    mask active;
+    vec3 dir = block_centre_rays(camera, width, height, block_x, block_y, &origin, &active);
     COUNT_MARCH(COUNT_CAMERA);
-    march_result centre = march_camera(origin, dir, inside & seen, pixel_angle, jitter, params);
+#if FEATURE_CONE
+    march_result centre = march_camera(origin, dir, active, pixel_angle, jitter, params, cones, packet);
+#else
+    march_result centre = march(origin, dir, active, pixel_angle, jitter, params);
+#endif
     vec3 normal = hit_normal(origin, dir, centre, pixel_angle, params);
 
     vec3 color;
@@ -45,32 +75,44 @@ __kernel VECTOR_LANES_HINT void render(__global float *out, PARAMS_SPACE scalar 
         color = trace_color(origin, dir, centre, normal, pixel_angle, params);
         coverage = SELECT((real)0.0f, (real)1.0f, centre.hit);
     } else {
-        // Stratified: a columns x rows array of cells covering the pixel,
-        // one jittered sample per cell (square counts fill every cell).
-        int columns = (int)ceil(sqrt((float)samples));
-        int rows = (samples + columns - 1) / columns;
         color = v3((real)0.0f, 0.0f, 0.0f);
         coverage = 0.0f;
-        for (int s = 0; s < samples; s++) {
-            lane_uint key = hash_lanes(pixel_id * (uint)samples + (uint)s) ^ seed;
-            real jx = ((real)(s % columns) + unit_random(key)) / (scalar)columns;
-            real jy = ((real)(s / columns) + unit_random(key ^ 0x9e3779b9u)) / (scalar)rows;
+        for (int first = 0; first < samples; first += LANES) {
+            int count = min(LANES, samples - first);
             vec3 sample_origin;
             mask sample_seen;
-            vec3 sample_dir = pixel_ray(camera, width, height, px + jx, py + jy, &sample_origin, &sample_seen);
-#if FEATURE_DEPTH_OF_FIELD
-            lens_sample(camera, unit_random(key ^ 0x85ebca6bu), unit_random(key ^ 0xc2b2ae35u),
-                        &sample_origin, &sample_dir);
+            lane_uint key;
+#if FEATURE_CONE
+            // the cones of these samples' packets, side by side
+            cone_packets sample_cones;
+            for (int s = first; s < first + count; s++) {
+                vec3 sample_dir = sample_ray(camera, width, height, px, py, pixel_id, s, samples, seed,
+                                             &sample_origin, &sample_seen, &key);
+                real t_enter, t_exit;
+                mask marched = march_span(sample_origin, sample_dir, inside & sample_seen, pixel_angle, params,
+                                          &t_enter, &t_exit);
+                cone_packet(sample_origin, sample_dir, marched, t_enter, t_exit, &sample_cones, s - first);
+            }
+            march_cones(&sample_cones, count, pixel_angle, params);
 #endif
-            COUNT_MARCH(COUNT_CAMERA);
-            march_result m = march_camera(sample_origin, sample_dir, inside & sample_seen, pixel_angle, jitter, params);
-            vec3 sample_normal = hit_normal(sample_origin, sample_dir, m, pixel_angle, params);
-#if FEATURE_PATH_TRACE
-            color = v3_add(color, path_color(sample_origin, sample_dir, m, sample_normal, pixel_angle, key, params));
+            for (int s = first; s < first + count; s++) {
+                vec3 sample_dir = sample_ray(camera, width, height, px, py, pixel_id, s, samples, seed,
+                                             &sample_origin, &sample_seen, &key);
+                COUNT_MARCH(COUNT_CAMERA);
+#if FEATURE_CONE
+                march_result m = march_camera(sample_origin, sample_dir, inside & sample_seen, pixel_angle, jitter,
+                                              params, &sample_cones, s - first);
 #else
-            color = v3_add(color, trace_color(sample_origin, sample_dir, m, sample_normal, pixel_angle, params));
+                march_result m = march(sample_origin, sample_dir, inside & sample_seen, pixel_angle, jitter, params);
 #endif
-            coverage = coverage + SELECT((real)0.0f, (real)1.0f, m.hit);
+                vec3 sample_normal = hit_normal(sample_origin, sample_dir, m, pixel_angle, params);
+#if FEATURE_PATH_TRACE
+                color = v3_add(color, path_color(sample_origin, sample_dir, m, sample_normal, pixel_angle, key, params));
+#else
+                color = v3_add(color, trace_color(sample_origin, sample_dir, m, sample_normal, pixel_angle, params));
+#endif
+                coverage = coverage + SELECT((real)0.0f, (real)1.0f, m.hit);
+            }
         }
         color = v3_scale(color, (real)(1.0f / (scalar)samples));
         coverage = coverage * (real)(1.0f / (scalar)samples);
@@ -142,4 +184,43 @@ __kernel VECTOR_LANES_HINT void render(__global float *out, PARAMS_SPACE scalar 
     store_vec3(albedo, CHANNEL_ALBEDO_R, &pixels);
 #endif
     write_block(&pixels, out + (block_y * pitch + block_x) * CHANNELS, pitch);
+}
+
+// Renders one tile. Work-item (gx, gy) covers the block of LANES_X x LANES_Y
+// pixels whose top-left pixel is (x0 + gx * LANES_X, y0 + gy * LANES_Y)
+// (compact blocks keep a work-item's rays alike, so its lanes diverge less
+// than a row of LANES would). With cone marching, the work-item of every
+// LANES-th block of a row renders it and the LANES - 1 after it (those of
+// the others return at once), their packets' cones marched side by side
+// first. `out`: the whole image, whatever the tile: rows of `pitch` pixels
+// of CHANNELS floats (R G B A Z N.x N.y N.z steps, then the passes asked
+// for), pixel (x, y) at (y * pitch + x) * CHANNELS; pitch >= width and its
+// row count >= height are multiples of LANES_X and LANES_Y (blocks past the
+// image's edge write there).
+__kernel VECTOR_LANES_HINT void render(__global float *out, PARAMS_SPACE scalar *params,
+                     __constant scalar *camera, int width, int height,
+                     int x0, int y0, int pitch, int samples, uint seed) {
+    int gx = get_global_id(0), gy = get_global_id(1);
+    int block_y = y0 + gy * LANES_Y;
+#if FEATURE_CONE
+    if (gx % LANES != 0)
+        return;
+    int count = min(LANES, (int)get_global_size(0) - gx);
+    scalar pixel_angle = camera_pixel_angle(camera, height);
+    cone_packets cones;
+    for (int packet = 0; packet < count; packet++) {
+        vec3 origin;
+        mask active;
+        vec3 dir = block_centre_rays(camera, width, height, x0 + (gx + packet) * LANES_X, block_y, &origin, &active);
+        real t_enter, t_exit;
+        active = march_span(origin, dir, active, pixel_angle, params, &t_enter, &t_exit);
+        cone_packet(origin, dir, active, t_enter, t_exit, &cones, packet);
+    }
+    march_cones(&cones, count, pixel_angle, params);
+    for (int packet = 0; packet < count; packet++)
+        render_block(out, params, camera, width, height, pitch, samples, seed, x0 + (gx + packet) * LANES_X, block_y,
+                     &cones, packet);
+#else
+    render_block(out, params, camera, width, height, pitch, samples, seed, x0 + gx * LANES_X, block_y);
+#endif
 }
