@@ -7,6 +7,15 @@
 //@ distance_signature  the scene's distance estimate at a point, which the engine and distance_at_points call
 ALWAYS_INLINE real distance_estimate(vec3 p, PARAMS_SPACE scalar *params)
 
+//@ distances_signature  the estimate at two points side by side (CPU lanes: independent work a core overlaps)
+ALWAYS_INLINE void distance_estimates(vec3 p0, vec3 p1, real *d0, real *d1, PARAMS_SPACE scalar *params)
+
+//@ distances_one_by_one  the estimate at two points, one after the other (one ray per work-item: a GPU's registers)
+ALWAYS_INLINE void distance_estimates(vec3 p0, vec3 p1, real *d0, real *d1, PARAMS_SPACE scalar *params) {
+    *d0 = distance_estimate(p0, params);
+    *d1 = distance_estimate(p1, params);
+}
+
 //@ surface_at  the surface properties at a point: the nearest part's material
 typedef struct { real $fields; } surface;
 

@@ -9,6 +9,10 @@ $signature {
 ${body}    return $result;
 }
 
+//@ function_of_points  a function of several points: `$body` its statements, the last storing the results
+$signature {
+${body}}
+
 //@ declare  a value computed once and named
 $type $name = $value;
 
@@ -18,14 +22,19 @@ $type $name;
 //@ assign
 $name = $value;
 
+//@ store_result  a function of several points' result at one
+*$name = $value;
+
 //@ assign_selected  a per-ray value, changed only for the rays of `mask`
 $name = SELECT($name, $value, $mask);
 
 //@ loop  a loop's head: its body and `end` follow
 for (int $counter = 0; $counter < $count; $counter++) {
 
-//@ loop_condition  rays whose condition fails stop; the loop ends when none is left
+//@ narrow  rays whose loop condition fails stop
 $active = $active & $condition;
+
+//@ loop_stop  the loop ends when none of its rays is left
 if (!ANY($active)) break;
 
 //@ count_iterations  the counting build's hook (stdlib_cl/count.cl): one iteration of the rays of `rays`

@@ -336,3 +336,86 @@ def test_the_device_builds_with_the_options_its_kernel_names(driver, monkeypatch
     monkeypatch.setattr(api, "build", recording)
     scene.render(width=16, height=16, progress=False)
     assert (scene.kernel_source(), wanted) in built
+
+
+# CSG, a transform, a built-in fractal with a param (its power-8 branch and
+# the general one), a hybrid of library formulas (loops in loops) and an
+# orbit trap's colour: every kind of code an estimate is written from
+TWO_POINTS_SCENE = """
+param power = 7 in [2, 16]
+let blend = union(sphere(0.5).translate((2.2, 0, 0)), box(0.4).twist(0.8).translate((2.2, 0.4, 0)), smooth: 0.2)
+scene union(fractal(hybrid(bulb() * 2, amazing_box(scale: -1.5)), iterations: 10, bound: 4),
+            mandelbulb(power: power).translate((0, 2.4, 0)), blend)
+"""
+
+TWO_POINTS_KERNEL = """
+__kernel VECTOR_LANES_HINT void at_two_points(__global const scalar *points, __constant scalar *params,
+                                              int count, __global scalar *out) {
+    int i = get_global_id(0);
+    vec3 p = v3(LOAD_LANES(i, points), LOAD_LANES(i, points + count), LOAD_LANES(i, points + 2 * count));
+    int j = i + get_global_size(0);
+    vec3 q = v3(LOAD_LANES(j, points), LOAD_LANES(j, points + count), LOAD_LANES(j, points + 2 * count));
+    real at_p, at_q;
+    distance_estimates(p, q, &at_p, &at_q, params);
+    STORE_LANES(at_p, i, out);
+    STORE_LANES(at_q, j, out);
+    STORE_LANES(distance_estimate(p, params), i, out + count);
+    STORE_LANES(distance_estimate(q, params), j, out + count);
+}
+"""
+
+
+def test_the_estimate_at_two_points_is_written_side_by_side():
+    # one loop for each of the estimate's loops, one branch for each of its
+    # per-ray branches, each statement once per point
+    source = fractalc.loads(TWO_POINTS_SCENE).kernel_source(lanes=8)
+    one, two = _function(source, "distance_estimate"), _function(source, "distance_estimates")
+    assert two.count("for (") == one.count("for (") > 0
+    assert two.count("if (ANY(") == one.count("if (ANY(") > 0
+    assert len(re.findall(r"\bsqrt\(", two)) == 2 * len(re.findall(r"\bsqrt\(", one))
+    # one ray per work-item (a GPU's): one estimate after the other
+    single = _function(fractalc.loads(TWO_POINTS_SCENE).kernel_source(lanes=1), "distance_estimates")
+    assert single.count("distance_estimate(") == 2 and "for (" not in single
+
+
+@pytest.mark.opencl
+@pytest.mark.parametrize("double", [False, True])
+def test_the_estimate_at_two_points_is_the_estimate_at_each(double, driver):
+    # pairs of points whose orbits end at different iterations (one escapes
+    # at once while the other iterates on, one inside the bound and the
+    # other outside): each point's value is the single estimate's
+    import pyopencl as cl
+    from fractalc.run import kernel_params
+    scene = fractalc.loads(TWO_POINTS_SCENE, device=driver, precision="double" if double else "float")
+    if double and not scene.device.info.double:
+        pytest.skip("no double precision")
+    lanes = scene.lanes_in_use
+    source = emit(lower(scene.checked), Target(lanes=lanes, double=double,
+                                              build_options=build_options(scene.device.info, double)))
+    source += TWO_POINTS_KERNEL
+    program = cl.Program(scene.device.context, source).build(options=list(build_options(scene.device.info, double)))
+    rng = np.random.default_rng(3)
+    near = np.concatenate([rng.normal((0, 2.4, 0), 0.6, (1024, 3)), rng.normal(0, 0.8, (1024, 3))])
+    far = np.concatenate([rng.uniform(-6, 6, (1024, 3)), rng.normal((2.2, 0.2, 0), 0.4, (1024, 3))])
+    points = np.concatenate([near, far[::-1]])       # p from one set, q from the other
+    count = len(points)
+    dtype = np.float64 if double else np.float32
+    planar = np.ascontiguousarray(points.T, dtype=dtype)
+    flags = cl.mem_flags
+    queue = scene.device.queue
+    points_buffer = cl.Buffer(scene.device.context, flags.READ_ONLY | flags.COPY_HOST_PTR, hostbuf=planar)
+    out = np.empty(2 * count, dtype=dtype)
+    out_buffer = cl.Buffer(scene.device.context, flags.WRITE_ONLY, out.nbytes)
+    program.at_two_points(queue, (count // 2 // lanes,), None, points_buffer,
+                          kernel_params(program, scene.device, [7.0], double), np.int32(count), out_buffer)
+    cl.enqueue_copy(queue, out, out_buffer)
+    side_by_side, one_by_one = out[:count], out[count:]
+    assert np.isfinite(one_by_one).all() and (one_by_one < 0).any() and (one_by_one > 0.5).any()
+    # the same operations; a compiler may contract them apart (Intel's
+    # runtime with its unsafe-math option, in float)
+    tolerance = 1e-12 if double else 1e-5
+    np.testing.assert_allclose(side_by_side, one_by_one, rtol=tolerance, atol=tolerance)
+    # and the kernel above evaluates the scene's estimate with its params
+    # (in float, a chaotic orbit of the hybrid may round apart in two programs)
+    reference = scene.distance(points)
+    assert (np.abs(one_by_one - reference) <= tolerance * (1 + np.abs(reference))).mean() > 0.99

@@ -3,12 +3,13 @@
 // hit threshold, so that detail below the pixel footprint is not amplified:
 // tetrahedral (4 evaluations, Quilez "normals for an SDF"), central (6), or
 // forward (3: the march's last evaluation, at the hit, is the fourth).
+// Their estimates are taken two at a time, side by side
+// (`distance_estimates`).
 vec3 tetrahedral_normal(vec3 p, real h, PARAMS_SPACE scalar *params) {
     COUNT_EVALUATIONS(COUNT_NORMALS, scoped(params), 4.0f);
-    real a = distance_estimate(v3(p.x + h, p.y - h, p.z - h), params);
-    real b = distance_estimate(v3(p.x - h, p.y - h, p.z + h), params);
-    real c = distance_estimate(v3(p.x - h, p.y + h, p.z - h), params);
-    real d = distance_estimate(v3(p.x + h, p.y + h, p.z + h), params);
+    real a, b, c, d;
+    distance_estimates(v3(p.x + h, p.y - h, p.z - h), v3(p.x - h, p.y - h, p.z + h), &a, &b, params);
+    distance_estimates(v3(p.x - h, p.y + h, p.z - h), v3(p.x + h, p.y + h, p.z + h), &c, &d, params);
     // differences first: a sum of two estimates near float's largest (a
     // point deep inside a far plane) would overflow
     return v3_normalize(v3((a - b) + (d - c), (c - a) + (d - b), (b - a) + (d - c)));
@@ -19,18 +20,19 @@ vec3 tetrahedral_normal(vec3 p, real h, PARAMS_SPACE scalar *params) {
 // (h times the surface's curvature; h is one hit threshold).
 vec3 forward_normal(vec3 p, real here, real h, PARAMS_SPACE scalar *params) {
     COUNT_EVALUATIONS(COUNT_NORMALS, scoped(params), 3.0f);
-    real dx = distance_estimate(v3(p.x + h, p.y, p.z), params) - here;
-    real dy = distance_estimate(v3(p.x, p.y + h, p.z), params) - here;
-    real dz = distance_estimate(v3(p.x, p.y, p.z + h), params) - here;
-    return v3_normalize(v3(dx, dy, dz));
+    real x, y;
+    distance_estimates(v3(p.x + h, p.y, p.z), v3(p.x, p.y + h, p.z), &x, &y, params);
+    real z = distance_estimate(v3(p.x, p.y, p.z + h), params);
+    return v3_normalize(v3(x - here, y - here, z - here));
 }
 
 vec3 central_normal(vec3 p, real h, PARAMS_SPACE scalar *params) {
     COUNT_EVALUATIONS(COUNT_NORMALS, scoped(params), 6.0f);
-    real dx = distance_estimate(v3(p.x + h, p.y, p.z), params) - distance_estimate(v3(p.x - h, p.y, p.z), params);
-    real dy = distance_estimate(v3(p.x, p.y + h, p.z), params) - distance_estimate(v3(p.x, p.y - h, p.z), params);
-    real dz = distance_estimate(v3(p.x, p.y, p.z + h), params) - distance_estimate(v3(p.x, p.y, p.z - h), params);
-    return v3_normalize(v3(dx, dy, dz));
+    real x0, x1, y0, y1, z0, z1;
+    distance_estimates(v3(p.x + h, p.y, p.z), v3(p.x - h, p.y, p.z), &x0, &x1, params);
+    distance_estimates(v3(p.x, p.y + h, p.z), v3(p.x, p.y - h, p.z), &y0, &y1, params);
+    distance_estimates(v3(p.x, p.y, p.z + h), v3(p.x, p.y, p.z - h), &z0, &z1, params);
+    return v3_normalize(v3(x0 - x1, y0 - y1, z0 - z1));
 }
 
 // Blinn-Phong: (albedo * max(n.l, 0) + specular * max(n.h, 0)^shininess)
