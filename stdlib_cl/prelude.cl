@@ -128,6 +128,10 @@ REFINED_RSQRT_OF(real)
 // (PoCL 3.1 otherwise calls it, passing its lanes through memory: 6% of
 // bulb-640's frame; docs/performance.md)
 #define ALWAYS_INLINE __attribute__((always_inline))
+// A function called once per many rays whose inlined body (an estimate of
+// its own) would only lengthen the build: cone marching's (bulb-640's
+// build on Intel's runtime 1.29 s inlined, 0.95 s not; its frame the same)
+#define NEVER_INLINE __attribute__((noinline))
 
 // The params buffer's address space: the counting build (count.cl) makes it
 // __global, for the counters that follow the params there

@@ -104,7 +104,7 @@ void cone_packet(vec3 origin, vec3 dir, mask active, real t_enter, real t_exit, 
 }
 
 // Marches the cones of the first `count` packets of `cones`.
-void march_cones(cone_packets *cones, int count, scalar pixel_angle, PARAMS_SPACE scalar *params) {
+NEVER_INLINE void march_cones(cone_packets *cones, int count, scalar pixel_angle, PARAMS_SPACE scalar *params) {
     // a packet a lane (the lanes past `count`: the last packet's axis, not marched)
     scalar axis[10][LANES];
     for (int q = 0; q < LANES; q++) {
