@@ -85,7 +85,7 @@ def test_frames_on_the_cluster_equal_local_frames_and_each_worker_builds_once(cl
     assert_same_frames(files, local)
     # the frames are on disk: a second run renders none; with --overwrite
     # all again, on kernels the workers built before
-    assert animate.render_frames(scene, files[0].replace("00", "%02d"), FPS, seed=5, samples=4,
+    assert animate.render_frames(scene, str(tmp_path / "farm" / "f_%02d.exr"), FPS, seed=5, samples=4,
                                  cluster=client)[1] == 0
     before = builds_per_worker(client)
     animate.render_frames(scene, str(tmp_path / "farm" / "f_%02d.exr"), FPS, seed=5, samples=4,
