@@ -89,11 +89,11 @@ class _FunctionWriter:
     a per-ray branch runs only for the rays still iterating.
 
     With `points` > 1, the function computes the same expressions at that
-    many points (p0, p1, ...) side by side: each statement once per point,
-    one loop for a loop of all points (it ends when none of their rays
-    iterates), one branch for a per-ray branch of any: independent chains
-    of operations that a CPU core overlaps, where one point's estimate
-    waits on its own results."""
+    many points (p0, p1, ...) side by side: each statement once per point
+    (a uniform one once), one loop for a loop of all points (it ends when
+    none of their rays iterates), one branch for a per-ray branch of any:
+    independent chains of operations that a CPU core overlaps, where one
+    point's estimate waits on its own results."""
 
     def __init__(self, root: ir.Expr, counting: bool = False, points: int = 1):
         self.root = root
@@ -130,18 +130,30 @@ class _FunctionWriter:
 
     def statements(self, statements, indent: str) -> None:
         run = []    # plain statements, written for one point after the other
-        for statement in (*statements, None):
-            if isinstance(statement, (ForBlock, IfBlock)) or statement is None:
-                for _ in self.each():
-                    for plain in run:
-                        self.statement(plain, indent)
+        for statement in statements:
+            if isinstance(statement, (ForBlock, IfBlock)):
+                self.plain(run, indent)
                 run = []
-            if isinstance(statement, ForBlock):
-                self.loop(statement, indent)
-            elif isinstance(statement, IfBlock):
-                self.branch(statement, indent)
-            elif statement is not None:
+                if isinstance(statement, ForBlock):
+                    self.loop(statement, indent)
+                else:
+                    self.branch(statement, indent)
+            else:
                 run.append(statement)
+        self.plain(run, indent)
+
+    def plain(self, statements, indent: str) -> None:
+        """Statements without blocks, at each point in turn; a uniform value
+        (params and constants alone) is the same at every point: written
+        once, at the first."""
+        first = self.copies[0]
+        for copy in self.each():
+            for statement in statements:
+                node = statement.node
+                if copy is first or node in self.varying:
+                    self.statement(statement, indent)
+                else:
+                    self.text[node], self.depth[node] = first.text[node], first.depth[node]
 
     def statement(self, statement, indent: str) -> None:
         if isinstance(statement, Hoist):
@@ -802,8 +814,9 @@ _IDENTIFIER = re.compile(r"\b[A-Za-z_]\w*\b")
 def _distances(distance: ir.Expr, target: Target) -> str:
     """`distance_estimates`: the estimate at two points, side by side
     where a work-item holds vector lanes (two chains of dependent operations
-    that a CPU core overlaps; bulb-640's normals and occlusion 4-6% faster
-    on Intel's runtime), one after the other with one ray per work-item."""
+    that a CPU core overlaps; bulb-640 2.5-4.4% faster on Intel's runtime
+    with its normals and occlusion in pairs, docs/performance.md), one
+    after the other with one ray per work-item."""
     if target.lanes == 1:
         return _scene_template("distances_one_by_one")
     return function_source(distance, _scene_template("distances_signature"), counting=target.count, points=2)
