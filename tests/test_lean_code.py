@@ -143,6 +143,10 @@ def test_overflow_guards_only_where_they_can_fire(bailout, high, guarded):
     assert bool(ESCAPE_TEST.search(body)) == guarded
     # the stopped flag goes with them: the loop's test is the bailout's alone
     assert bool(re.search(r"a0 = a0 & \(\(!s\d+\) & ", body)) == guarded
+    # and the clamp of the final estimate: with |z| bounded and the log's
+    # argument kept within [1e-30, 1e18], 0.5 ln(r) r / dr cannot leave +-1e30
+    final = [line for line in body.splitlines() if "log(" in line][-1]
+    assert bool(re.search(r"clamp\(", final)) == guarded, final
 
 
 def test_the_analysis_keeps_what_can_happen():
