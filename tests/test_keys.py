@@ -77,3 +77,20 @@ def test_the_camera_checks_its_aim_in_one_place():
 def test_a_parameter_spelt_as_text_fails_where_it_is_declared():
     with pytest.raises(TypeError, match="parameter 'radius'"):
         Parameter("radius", "num", None, (">0",))
+
+
+def test_a_setting_given_as_it_stands_is_kept_and_any_other_value_checked():
+    """A frame given the settings it has (the same width and height each
+    frame) keeps the settings as they are, with no check and no copy; a
+    value that only equals it (a float for a whole number, a bool) or
+    differs is checked as ever."""
+    import fractalc
+    scene = fractalc.loads("scene sphere(1)\nrender { width: 64, height: 48, epsilon: pixel }")
+    settings = scene.checked.render
+    assert scene.render_settings(width=64, height=48, epsilon="pixel") is settings
+    assert scene.render_settings(width=64.0) == settings and type(scene.render_settings(width=64.0).width) is int
+    with pytest.raises(ValueError, match="'width' must be a number, not True"):
+        scene.render_settings(width=True)
+    with pytest.raises(ValueError, match="whole number"):
+        scene.render_settings(height=48.5)
+    assert scene.render_settings(width=32, height=48).width == 32

@@ -474,6 +474,11 @@ def test_frames_share_one_kernel_and_each_renders_its_own_params_and_camera():
     alone = fractalc.loads(text, params={"r": 1.3}).render(width=W, height=H, camera=side)
     np.testing.assert_array_equal(moved.rgba, alone.rgba)
     assert not np.array_equal(moved.depth, first.depth)
+    # and each frame's metadata its own params and camera
+    assert first.metadata["params"] == again.metadata["params"] == "r=1 shift=0"
+    assert moved.metadata["params"] == "r=1.3 shift=0"
+    assert moved.metadata["camera.position"] == "2 -3 1.5" != first.metadata["camera.position"]
+    assert moved.metadata["worldToCamera"] != first.metadata["worldToCamera"]
 
 
 @pytest.mark.opencl
