@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 from . import ir, pathtrace, ranges
 from .hoist import DERIVED_SLOTS, Hoisted, hoist
-from .lower import POINT, SceneIR
+from .lower import POINT, SceneIR, marched_distance
 from .transforms import Bound
 from .types import FLOAT_MAX, Feature, Parameter, Type, keys_of
 from .schedule import ForBlock, Hoist, IfBlock, schedule, varying
@@ -747,6 +747,7 @@ def emit(scene_ir: SceneIR, target: Target = Target()) -> str:
     """The complete OpenCL program for a lowered scene."""
     lib = library()
     scene = scene_ir.scene
+    scene_ir = dataclasses.replace(scene_ir, distance=marched_distance(scene_ir, features(scene_ir)["SCENE_BOUND"]))
     # the bound too: its radius is often the fractal's, a derived param already
     bound_values = _bound_expressions(scene_ir.bound) if scene_ir.bound is not None else ()
     hoisted = _lean((scene_ir.distance, *scene_ir.surface.items(), *bound_values), scene_ir)

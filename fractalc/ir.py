@@ -434,6 +434,19 @@ def bounded(bound: Expr, inner: Expr, radius: Expr) -> Expr:
     return branch(op("lt", bound, mul(radius, const(BOUND_MARGIN))), (inner,), (bound,))[0]
 
 
+def inside_bound(distance: Expr, point: tuple[Expr, ...], radius: Expr) -> Expr:
+    """`distance` where the point is within BOUND_MARGIN radii of the
+    sphere of `radius` about the origin: if `distance` is `bounded` by that
+    sphere (of `point`), its inner estimate alone, without the test and the
+    sphere's distance; else `distance` as it is."""
+    if isinstance(distance, Out) and isinstance(distance.source, Branch):
+        test, (inner,), otherwise = distance.source.condition, distance.source.then, distance.source.otherwise
+        sphere = call("sd_sphere", (Vec(tuple(point)), radius))
+        if test == op("lt", sphere, mul(radius, const(BOUND_MARGIN))) and otherwise == (sphere,):
+            return inner
+    return distance
+
+
 # ---- walking ---------------------------------------------------------------
 
 def children(e) -> tuple:

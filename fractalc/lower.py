@@ -311,6 +311,25 @@ class _Bounds:
         return Bound(sphere, half_spaces)
 
 
+def marched_distance(scene_ir: SceneIR, bound_marched: bool) -> ir.Expr:
+    """The distance as a render samples it. Where its march keeps to the
+    scene's bounding sphere (`bound_marched`: the camera's rays from where
+    they enter it to where they leave, the shadow rays to where they leave
+    it, the normals' and the occlusion's samples near a surface), a scene
+    that is one shape bounded by that sphere needs no test of the sphere
+    in each estimate, whose far side would never be taken: the shape's own
+    estimate (bulb-640 1.5% faster on Intel's runtime, 3% on PoCL). A
+    point beyond it still gets an estimate, the shape's own (its program's
+    `distance_at_points` too); the distance program keeps the test."""
+    bound = scene_ir.bound
+    if not bound_marched or bound is None or bound.sphere is None or bound.half_spaces:
+        return scene_ir.distance
+    centre, radius = bound.sphere
+    if not all(ir.is_const(c) and c.value == 0 for c in centre):
+        return scene_ir.distance
+    return ir.inside_bound(scene_ir.distance, ir.components(POINT), radius)
+
+
 def lower(scene: CheckedScene, escape_time_sets: bool = False) -> SceneIR:
     """Lower the scene's shape to its distance and surface expressions; with
     `escape_time_sets`, each fractal that has a bailout as its escape-time

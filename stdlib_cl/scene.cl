@@ -97,7 +97,10 @@ ${body}${stores}}
 //   distance_at_points(__global const ${scalar} *points, __global ${scalar} *distances,
 //                      __constant ${scalar} *params, int count)
 //     points: count x's, then count y's, then count z's; count a multiple of
-//     LANES; global size count / LANES.
+//     LANES; global size count / LANES. The estimate as the render samples
+//     it: where its march keeps to the scene's bounding sphere, a scene of
+//     one fractal there gives the fractal's own estimate beyond the sphere
+//     too (fractalc's distance program, the sphere's distance).
 //   derived_params(__global ${scalar} *params)
 //     Run first, on one work-item, whenever the params change: fills the
 //     ${slots} slots after the scene's params with the values computed from

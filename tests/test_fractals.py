@@ -20,6 +20,9 @@ import pytest
 import fractalc
 import reference_fractals as ref
 from fractalc import build as build_module
+from fractalc import emit as emit_module
+from fractalc.emit import Target, emit_distance
+from fractalc.lower import lower
 from test_fractal_library import ball, relative_error, shell, tolerance
 
 PRECISIONS = ("float", "double")
@@ -519,11 +522,41 @@ def _check_bounded_structure(source, names):
     assert sorted(found) == sorted(names), f"fractal loops {found}, expected {names}"
 
 
-@pytest.mark.opencl
 @pytest.mark.parametrize("precision", PRECISIONS)
 @pytest.mark.parametrize("name", FRACTALS)
 def test_the_fractal_is_evaluated_only_inside_the_bound_block(name, precision):
-    _check_bounded_structure(scene(f"scene {name}()", precision).kernel_source(), [name])
+    # the estimate of the distance program (Scene.distance samples any
+    # point); a render whose march keeps to the bound needs no block
+    # (test_a_render_marching_within_the_bound_takes_the_fractal_s_own_estimate)
+    checked = scene(f"scene {name}()", precision).checked
+    _check_bounded_structure(emit_distance(lower(checked), Target(double=precision == "double")), [name])
+
+
+@pytest.mark.opencl
+def test_a_render_marching_within_the_bound_takes_the_fractal_s_own_estimate(monkeypatch):
+    """A scene that is one fractal, bounded by the scene's sphere: its
+    render marches within that sphere (camera rays, shadow rays, normals and
+    occlusion near a surface), where the bound block's far side is never
+    taken, so the render program's estimate is the fractal's own: the same
+    image, bit for bit, as with the block. Where the march leaves the
+    sphere (glow), or the sphere is not the scene's whole bound (a ground
+    plane), the block stays."""
+    text = ("scene mandelbulb()\ncamera { position: (0, -2.8, 1), target: (0, 0, 0), fov: 40 }\n"
+            "light directional { direction: (-0.5, 0.4, -1), shadows: hard }\n"
+            "render { width: 64, height: 48, ao: 0.7 }\n")
+    marched = scene(text)
+    assert "sd_sphere(" not in _function_body(marched.kernel_source(), "real distance_estimate(")
+    for other in (text.replace("ao: 0.7", "ao: 0.7, glow: { strength: 0.5, radius: 0.1 }"),
+                  text.replace("scene mandelbulb()", "scene mandelbulb() | plane(offset: -1.5)")):
+        assert "sd_sphere(" in _function_body(scene(other).kernel_source(), "real distance_estimate(")
+    image = marched.render()
+    monkeypatch.setattr(emit_module, "marched_distance", lambda scene_ir, bound_marched: scene_ir.distance)
+    blocked = fractalc.loads(text + "# with the bound block\n")
+    assert "sd_sphere(" in _function_body(blocked.kernel_source(), "real distance_estimate(")
+    with_block = blocked.render()
+    assert 0.2 < np.isfinite(image.depth).mean() < 0.8
+    np.testing.assert_array_equal(image.rgba, with_block.rgba)
+    np.testing.assert_array_equal(image.depth, with_block.depth)
 
 
 @pytest.mark.opencl
