@@ -140,22 +140,31 @@ def kernel_params(program, device: Device, params, double: bool, extra: int = 0)
     return buffer
 
 
-def _guard(action: str):
-    """Turn OpenCL runtime failures into RenderError with one-line causes."""
-    import pyopencl as cl
+class _Guard:
+    """A context manager that turns OpenCL runtime failures into RenderError
+    with one-line causes, naming the `action` under way (a class of its
+    own: one made per render cost 20 us of each frame's Python)."""
 
-    class _Guard:
-        def __enter__(self):
-            return self
+    def __init__(self, action: str):
+        self.action = action
 
-        def __exit__(self, kind, error, trace):
-            if error is not None and is_out_of_memory(error):
-                raise RenderError(f"out of memory while {action}") from None
-            if isinstance(error, cl.Error):
-                raise RenderError(f"OpenCL failed while {action}: {error}") from None
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, error, trace):
+        if error is None:
             return False
+        import pyopencl as cl
+        if is_out_of_memory(error):
+            raise RenderError(f"out of memory while {self.action}") from None
+        if isinstance(error, cl.Error):
+            raise RenderError(f"OpenCL failed while {self.action}: {error}") from None
+        return False
 
-    return _Guard()
+
+def _guard(action: str) -> _Guard:
+    """Turn OpenCL runtime failures into RenderError with one-line causes."""
+    return _Guard(action)
 
 
 def render_arguments(out, params, camera, frame: Frame, x0: int, y0: int, pitch: int) -> tuple:
