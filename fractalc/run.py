@@ -162,10 +162,6 @@ class _Guard:
         return False
 
 
-def _guard(action: str) -> _Guard:
-    """Turn OpenCL runtime failures into RenderError with one-line causes."""
-    return _Guard(action)
-
 
 def render_arguments(out, params, camera, frame: Frame, x0: int, y0: int, pitch: int) -> tuple:
     """The render kernel's arguments after its global size, in the order
@@ -254,7 +250,7 @@ class RenderKernel:
         tile_width, tile_height = grid.padded(min(most_columns, pitch), min(most_lines, rows))
         # a new array per frame: the image returned is this array, which the caller keeps
         image = np.empty((rows, pitch, len(channels)), dtype=np.float32)
-        with _guard("rendering"):
+        with _Guard("rendering"):
             # the kernel writes into `image` itself where the device can (CPUs):
             # no copy; mapping it at the end makes its contents current anywhere
             out = cl.Buffer(self.device.context, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=image)
@@ -296,7 +292,7 @@ class RenderKernel:
         top, bottom = first // grid.step[1] * grid.step[1], _round_up(first + count, grid.step[1])   # whole blocks
         launch_width, _ = grid.padded(min(TILE_WIDTH, pitch), 0)
         tile = np.empty((bottom - top, pitch, len(channels)), dtype=np.float32)
-        with _guard("rendering"):
+        with _Guard("rendering"):
             out = cl.Buffer(self.device.context, cl.mem_flags.WRITE_ONLY, bottom * pitch * len(channels) * 4)
             uniforms = self._uniforms(frame, params)
             for x0 in range(0, pitch, launch_width):
@@ -320,7 +316,7 @@ def counted_render(program, device: Device, frame: Frame, params, lanes: int, do
     columns, lines = grid.items(pitch, rows)
     base = len(params) + DERIVED_SLOTS
     state = np.zeros(base + columns * lines * slots * lanes, dtype=_scalar(double))
-    with _guard("counting distance evaluations"):
+    with _Guard("counting distance evaluations"):
         flags = cl.mem_flags
         state_buffer = kernel_params(program, device, params, double, columns * lines * slots * lanes)
         out = cl.Buffer(device.context, flags.WRITE_ONLY, rows * pitch * channels * 4)
@@ -365,7 +361,7 @@ def distances(program, device: Device, points: np.ndarray, params, lanes: int, d
     planar = np.zeros((3, padded), dtype=_scalar(double))
     planar[:, :count] = points.T
     result = np.empty(padded, dtype=_scalar(double))
-    with _guard("evaluating distances"):
+    with _Guard("evaluating distances"):
         flags = cl.mem_flags
         points_buffer = cl.Buffer(device.context, flags.READ_ONLY | flags.COPY_HOST_PTR, hostbuf=planar)
         out = cl.Buffer(device.context, flags.WRITE_ONLY, result.nbytes)
@@ -402,7 +398,7 @@ def uniform_values(program, device: Device, params, count: int, double: bool) ->
     (emit.uniform_source)."""
     import pyopencl as cl
     result = np.empty(count, dtype=_scalar(double))
-    with _guard("evaluating the scene's bound"):
+    with _Guard("evaluating the scene's bound"):
         out = cl.Buffer(device.context, cl.mem_flags.WRITE_ONLY, result.nbytes)
         cl.Kernel(program, "uniform_values")(device.queue, (1,), None, _constant_buffer(device, params, double), out)
         cl.enqueue_copy(device.queue, result, out)
